@@ -1,0 +1,1 @@
+"""Procedural assets: the bundled spacecraft model builder."""

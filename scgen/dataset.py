@@ -1,0 +1,90 @@
+"""The on-disk dataset layout (docs/dataset.md): paths, manifest, records and the metadata table."""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from scgen.errors import ScgenError
+
+MANIFEST = "scgen.json"
+FORMAT = "scgen-bop/1"
+CHUNK = 1000  # samples per BOP scene folder: scene_id = sample_id // CHUNK
+
+
+class Layout:
+    """Paths of one dataset's files; sample ids double as BOP im_ids."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+
+    def chunk_dir(self, split: str, sample_id: int) -> Path:
+        return self.root / split / f"{sample_id // CHUNK:06d}"
+
+    def rgb(self, split: str, sample_id: int, ext: str = "png") -> Path:
+        return self.chunk_dir(split, sample_id) / "rgb" / f"{sample_id:06d}.{ext}"
+
+    def mask(self, split: str, sample_id: int, visib: bool = False) -> Path:
+        sub = "mask_visib" if visib else "mask"
+        return self.chunk_dir(split, sample_id) / sub / f"{sample_id:06d}_000000.png"
+
+    def xyz(self, split: str, sample_id: int) -> Path:
+        return self.chunk_dir(split, sample_id) / "xyz" / f"{sample_id:06d}_000000.exr"
+
+    def depth(self, split: str, sample_id: int) -> Path:
+        return self.chunk_dir(split, sample_id) / "depth" / f"{sample_id:06d}.png"
+
+    def record(self, split: str, sample_id: int) -> Path:
+        return self.chunk_dir(split, sample_id) / "records" / f"{sample_id:06d}.json"
+
+    @property
+    def manifest_path(self) -> Path:
+        return self.root / MANIFEST
+
+    @property
+    def metadata_path(self) -> Path:
+        return self.root / "metadata.csv"
+
+    @property
+    def splits_path(self) -> Path:
+        return self.root / "splits.json"
+
+    def record_paths(self) -> Iterator[Path]:
+        yield from sorted(self.root.glob("*/[0-9]*/records/[0-9]*.json"))
+
+
+def read_json(path: Path) -> Any:
+    return json.loads(path.read_text())
+
+
+def dumps(obj: Any) -> str:
+    """Canonical JSON (sorted keys, fixed indent) so identical content gives identical bytes."""
+    return json.dumps(obj, indent=1, sort_keys=True) + "\n"
+
+
+def open_dataset(root: str | Path) -> tuple[Layout, dict[str, Any]]:
+    """The layout and manifest of an existing dataset; a clear error when `root` is not one."""
+    layout = Layout(root)
+    if not layout.root.is_dir():
+        raise ScgenError(f"not a dataset folder: {root} does not exist or is not a directory")
+    if not layout.manifest_path.is_file():
+        raise ScgenError(f"not a dataset folder: {root} has no {MANIFEST} (make one with `scgen render`)")
+    try:
+        manifest = read_json(layout.manifest_path)
+    except json.JSONDecodeError as exc:
+        raise ScgenError(f"corrupt manifest {layout.manifest_path}: {exc}") from exc
+    if manifest.get("format") != FORMAT:
+        raise ScgenError(f"unsupported dataset format {manifest.get('format')!r} in {layout.manifest_path}")
+    return layout, manifest
+
+
+def read_metadata(root: str | Path) -> list[dict[str, str]]:
+    """Rows of metadata.csv (strings; callers convert the columns they use)."""
+    layout, _ = open_dataset(root)
+    if not layout.metadata_path.is_file():
+        raise ScgenError(f"dataset {root} has no metadata.csv: the render did not finish (re-run it to resume)")
+    with open(layout.metadata_path, newline="") as f:
+        return list(csv.DictReader(f))

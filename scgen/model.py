@@ -1,0 +1,182 @@
+"""The target model: loading any mesh, normalising it to the fixed object frame, BOP model files.
+
+The object frame is centred on the bounding-box centre and scaled so the model's diameter (the
+largest distance between two of its points) equals a fixed value; every pose refers to it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from scgen.errors import ScgenError
+
+MATERIALS = ("mli_gold", "mli_silver", "solar_cell", "white_paint", "brushed_metal", "dark_metal")
+MATERIAL_COLOURS = {  # sRGB vertex colours in the BOP PLY, for viewers and the BOP toolkit
+    "mli_gold": (212, 160, 60),
+    "mli_silver": (200, 200, 205),
+    "solar_cell": (30, 40, 90),
+    "white_paint": (235, 235, 230),
+    "brushed_metal": (160, 160, 165),
+    "dark_metal": (60, 60, 65),
+}
+_MATERIAL_KEYWORDS = (
+    ("gold", "mli_gold"),
+    ("mli", "mli_silver"),
+    ("silver", "mli_silver"),
+    ("foil", "mli_silver"),
+    ("solar", "solar_cell"),
+    ("cell", "solar_cell"),
+    ("panel", "solar_cell"),
+    ("paint", "white_paint"),
+    ("white", "white_paint"),
+    ("black", "dark_metal"),
+    ("dark", "dark_metal"),
+    ("metal", "brushed_metal"),
+    ("alu", "brushed_metal"),
+)
+DEFAULT_DIAMETER_M = 0.2
+PARTS_FILE = "parts.glb"
+BOP_MODEL_FILE = "obj_000001.ply"
+
+
+@dataclass
+class TargetModel:
+    """Normalised target: parts (material, mesh) in metres in the object frame, plus the merged mesh."""
+
+    name: str
+    parts: list[tuple[str, trimesh.Trimesh]]
+    mesh: trimesh.Trimesh
+    diameter: float
+
+    @property
+    def fingerprint(self) -> str:
+        """A hash of the normalised geometry, used to refuse resuming into another model's dataset."""
+        h = hashlib.sha256()
+        for material, m in self.parts:
+            h.update(material.encode())
+            h.update(np.round(np.asarray(m.vertices, dtype=np.float64), 7).tobytes())
+            h.update(np.asarray(m.faces, dtype=np.int64).tobytes())
+        return h.hexdigest()[:16]
+
+
+def mesh_diameter(vertices: np.ndarray) -> float:
+    """Largest distance between two vertices (exact, via the convex hull)."""
+    pts = np.asarray(vertices, dtype=np.float64)
+    try:
+        pts = pts[trimesh.convex.convex_hull(pts).vertices] if len(pts) > 4 else pts
+    except Exception:  # degenerate (flat) point sets have no 3D hull: use all points
+        pass
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1) if len(pts) < 4000 else None
+    if d2 is None:
+        return float(max(np.linalg.norm(pts - p, axis=1).max() for p in pts))
+    return float(np.sqrt(d2.max()))
+
+
+def normalise_parts(
+    parts: list[tuple[str, trimesh.Trimesh]], diameter_m: float | None = DEFAULT_DIAMETER_M, name: str = "model"
+) -> TargetModel:
+    """Centre the parts on their joint bbox centre and scale them to `diameter_m` (None keeps the scale)."""
+    parts = [(mat, m.copy()) for mat, m in parts if len(m.faces) > 0]
+    if not parts:
+        raise ScgenError(f"mesh '{name}' has no triangles")
+    merged = trimesh.util.concatenate([m for _, m in parts])
+    lo, hi = merged.bounds
+    centre = 0.5 * (lo + hi)
+    diameter = mesh_diameter(merged.vertices)
+    if not np.isfinite(diameter) or diameter <= 0:
+        raise ScgenError(f"mesh '{name}' is degenerate (zero extent)")
+    scale = 1.0 if diameter_m is None else diameter_m / diameter
+    for _, m in parts:
+        m.apply_translation(-centre)
+        m.apply_scale(scale)
+    merged = trimesh.util.concatenate([m for _, m in parts])
+    return TargetModel(name=name, parts=parts, mesh=merged, diameter=diameter * scale)
+
+
+def material_for(name: str | None) -> str:
+    """Map a CAD material (or part) name onto one of the renderer's spacecraft materials."""
+    low = (name or "").lower()
+    if low in MATERIALS:
+        return low
+    for key, material in _MATERIAL_KEYWORDS:
+        if key in low:
+            return material
+    return "white_paint"
+
+
+def load_mesh_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
+    """Read OBJ/PLY/GLB/GLTF/STL into (material, mesh) parts; the CAD's material names are kept."""
+    if not path.exists():
+        raise ScgenError(f"mesh not found: {path}")
+    if path.suffix.lower() not in (".obj", ".ply", ".glb", ".gltf", ".stl", ".off"):
+        raise ScgenError(f"unsupported mesh format '{path.suffix}' for {path} (use OBJ, PLY, GLB, GLTF or STL)")
+    try:
+        loaded = trimesh.load(str(path), force="scene", process=False)
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        raise ScgenError(f"cannot read mesh {path}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
+    parts = []
+    for geom_name, geom in loaded.geometry.items():
+        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            continue
+        mesh = geom.copy()
+        transforms = loaded.graph.geometry_nodes.get(geom_name, [])
+        if transforms:
+            mesh.apply_transform(loaded.graph.get(transforms[0])[0])
+        mat = getattr(getattr(geom.visual, "material", None), "name", None)
+        parts.append((material_for(mat or geom_name), mesh))
+    if not parts:
+        raise ScgenError(f"mesh {path} has no triangles")
+    return parts
+
+
+def load_target(path: str | Path | None = None, keep_scale: bool = False) -> TargetModel:
+    """The bundled spacecraft (path None) or any user mesh, normalised to the object frame."""
+    if path is None:
+        path = Path(__file__).resolve().parents[1] / "assets" / "spacecraft" / PARTS_FILE
+        if not path.exists():
+            raise ScgenError(f"bundled model missing at {path}: run `make assets`")
+        return normalise_parts(load_mesh_parts(path), diameter_m=None, name="spacecraft")
+    path = Path(path)
+    return normalise_parts(load_mesh_parts(path), None if keep_scale else DEFAULT_DIAMETER_M, name=path.stem)
+
+
+def models_info(model: TargetModel) -> dict[str, dict[str, float]]:
+    """BOP models_info.json content (millimetres) for object id 1."""
+    lo, hi = model.mesh.bounds * 1000.0
+    size = hi - lo
+    return {
+        "1": {
+            "diameter": model.diameter * 1000.0,
+            "min_x": lo[0],
+            "min_y": lo[1],
+            "min_z": lo[2],
+            "size_x": size[0],
+            "size_y": size[1],
+            "size_z": size[2],
+        }
+    }
+
+
+def write_model_dir(model: TargetModel, out: Path) -> None:
+    """Write parts.glb (metres, named materials), obj_000001.ply (mm, vertex colours), models_info.json."""
+    out.mkdir(parents=True, exist_ok=True)
+    scene = trimesh.Scene()
+    for k, (material, mesh) in enumerate(model.parts):
+        m = mesh.copy()
+        m.visual = trimesh.visual.TextureVisuals(material=trimesh.visual.material.PBRMaterial(name=material))
+        scene.add_geometry(m, geom_name=f"{material}.{k:03d}")
+    scene.export(str(out / PARTS_FILE))
+    coloured = []
+    for material, mesh in model.parts:
+        m = trimesh.Trimesh(mesh.vertices * 1000.0, mesh.faces, process=False)
+        m.visual.vertex_colors = np.tile([*MATERIAL_COLOURS[material], 255], (len(m.vertices), 1))
+        coloured.append(m)
+    trimesh.util.concatenate(coloured).export(str(out / BOP_MODEL_FILE), encoding="binary")
+    info = {k: {kk: float(vv) for kk, vv in v.items()} for k, v in models_info(model).items()}
+    (out / "models_info.json").write_text(json.dumps(info, indent=2) + "\n")

@@ -1,0 +1,43 @@
+"""Radiometry shared by every backend: sun and Earth-albedo irradiance under the camera exposure.
+
+Camera model: an image value of 1.0 (before sRGB encoding and clipping) is what a white
+Lambertian plate facing a 1-AU sun (1361 W/m^2) gives at exposure EV 0; each +1 EV halves it.
+A renderer whose Lambertian radiance is albedo * E * cos / pi must be given E * pi * scale.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scgen.scenes.spec import SceneSpec
+
+SOLAR_CONSTANT = 1361.0
+
+
+def exposure_scale(spec: SceneSpec) -> float:
+    """Linear image value per (W/m^2 of irradiance on a white Lambertian plate)."""
+    return 2.0 ** (-spec.camera.exposure_ev) / SOLAR_CONSTANT
+
+
+def sun_render_irradiance(spec: SceneSpec) -> float:
+    """Irradiance to give a renderer's directional sun so image values follow the camera model."""
+    return float(np.pi * spec.sun.irradiance * exposure_scale(spec))
+
+
+def earth_albedo_light(spec: SceneSpec) -> tuple[np.ndarray, float] | None:
+    """(direction towards the Earth, renderer irradiance) of the Earth's reflected light, or None.
+
+    A Lambertian sphere of albedo a subtending angular radius rho and lit at phase such that a
+    fraction f = (1 - s.c) / 2 of the visible disc is day side gives about a * E * sin^2(rho) * f.
+    """
+    if spec.background.kind != "earth":
+        return None
+    params = spec.background.params
+    c = np.asarray(params["centre_dir"], np.float64)
+    s = np.asarray(spec.sun.direction, np.float64)
+    lit = 0.5 * (1.0 - float(c @ s))
+    rho = np.deg2rad(params["angular_radius_deg"])
+    e = params["albedo"] * spec.sun.irradiance * np.sin(rho) ** 2 * lit
+    if e <= 0:
+        return None
+    return c, float(np.pi * e * exposure_scale(spec))

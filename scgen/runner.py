@@ -1,0 +1,184 @@
+"""Plan and run a render: validate everything, plan splits up front, render missing samples, finalize."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+import scgen
+from scgen.annotate import annotate
+from scgen.atomic import atomic_write_text, remove_stale_temporaries
+from scgen.dataset import FORMAT, MANIFEST, Layout, dumps, read_json
+from scgen.errors import ScgenError
+from scgen.model import TargetModel, load_target, write_model_dir
+from scgen.render.base import BACKENDS, create_backend
+from scgen.scenes import load_config, sample_scene
+from scgen.scenes.spec import SceneSpec
+from scgen.splits import SPLITS, plan_splits, split_lists
+from scgen.writer import WriteOptions, existing_sample_ids, finalize, spec_key, write_sample
+
+QUALITIES = ("draft", "default", "high")
+
+
+@dataclass
+class RenderJob:
+    """Everything `scgen render` was asked to do."""
+
+    out: Path
+    n: int
+    seed: int = 0
+    backend: str = "blender"
+    quality: str = "default"
+    device: str = "auto"
+    model_path: Path | None = None
+    keep_scale: bool = False
+    config_path: Path | None = None
+    overrides: dict[str, Any] = field(default_factory=dict)
+    resolution: tuple[int, int] | None = None
+    split_by: str = "factors"
+    ratios: tuple[float, float, float] = (0.7, 0.1, 0.2)
+    shard: tuple[int, int] = (0, 1)
+    write: WriteOptions = field(default_factory=WriteOptions)
+
+
+@dataclass
+class Plan:
+    """The resolved inputs of a job: config, model, every SceneSpec and its split."""
+
+    cfg: dict[str, Any]
+    model: TargetModel
+    specs: list[SceneSpec]
+    splits: list[str]
+    keys: list[str]
+
+
+def validate_job(job: RenderJob) -> None:
+    """Checks that need no heavy work; raise ScgenError naming the bad value."""
+    if job.n <= 0:
+        raise ScgenError(f"--n must be a positive number of samples, got {job.n}")
+    if job.backend not in BACKENDS:
+        raise ScgenError(f"unknown backend '{job.backend}' (choose from {', '.join(BACKENDS)})")
+    if job.quality not in QUALITIES:
+        raise ScgenError(f"unknown quality '{job.quality}' (choose from {', '.join(QUALITIES)})")
+    i, count = job.shard
+    if count <= 0 or not 0 <= i < count:
+        raise ScgenError(f"--shard must be i/N with 0 <= i < N, got {i}/{count}")
+    if job.out.exists() and not job.out.is_dir():
+        raise ScgenError(f"output {job.out} exists and is not a directory")
+    if job.out.is_dir() and any(job.out.iterdir()) and not (job.out / MANIFEST).exists():
+        raise ScgenError(f"output {job.out} is a non-empty folder that is not an scgen dataset")
+    parent = job.out if job.out.exists() else _existing_parent(job.out)
+    if not os.access(parent, os.W_OK):
+        raise ScgenError(f"output {job.out} is not writable")
+
+
+def _existing_parent(p: Path) -> Path:
+    p = p.absolute()
+    while not p.exists():
+        p = p.parent
+    return p
+
+
+def make_plan(job: RenderJob) -> Plan:
+    cfg = load_config(job.config_path, job.overrides, job.resolution)
+    model = load_target(job.model_path, keep_scale=job.keep_scale)
+    specs = [sample_scene(job.seed, i, cfg, model.diameter) for i in range(job.n)]
+    keys = [spec_key(s) for s in specs]
+    return Plan(cfg, model, specs, plan_splits(keys, job.ratios, job.seed, job.split_by), keys)
+
+
+def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:
+    """What identifies a dataset: a resume or a shard must match it exactly."""
+    cfg_text = json.dumps(plan.cfg, sort_keys=True)
+    return {
+        "format": FORMAT,
+        "scgen_version": scgen.__version__,
+        "seed": job.seed,
+        "n": job.n,
+        "backend": job.backend,
+        "quality": job.quality,
+        "model": {"name": plan.model.name, "fingerprint": plan.model.fingerprint,
+                  "diameter_m": plan.model.diameter},
+        "config_sha256": hashlib.sha256(cfg_text.encode()).hexdigest(),
+        "split_by": job.split_by,
+        "split_ratios": list(job.ratios),
+        "rgb_format": job.write.rgb_format,
+        "xyz_dtype": job.write.xyz_dtype,
+        "save_depth": job.write.save_depth,
+    }  # fmt: skip
+
+
+def prepare_output(job: RenderJob, plan: Plan) -> Layout:
+    """Create the dataset folder and its static files, or check that an existing one matches."""
+    layout = Layout(job.out)
+    manifest = manifest_for(job, plan)
+    if layout.manifest_path.exists():
+        old = read_json(layout.manifest_path)
+        diff = sorted(k for k in manifest.keys() | old.keys() if manifest.get(k) != old.get(k))
+        if diff:
+            details = ", ".join(f"{k}: {old.get(k)!r} on disk vs {manifest.get(k)!r} now" for k in diff)
+            raise ScgenError(f"refusing to resume into {job.out}: it was made with different settings ({details})")
+        remove_stale_temporaries(layout.root)
+        return layout
+    layout.root.mkdir(parents=True, exist_ok=True)
+    cam = plan.cfg["camera"]
+    camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
+              "height": cam["height"], "depth_scale": 1.0}  # fmt: skip
+    atomic_write_text(layout.root / "camera.json", dumps(camera))
+    atomic_write_text(layout.root / "config.json", dumps(plan.cfg))
+    write_model_dir(plan.model, layout.root / "models")
+    atomic_write_text(
+        layout.splits_path,
+        dumps({"split_by": job.split_by, "ratios": list(job.ratios), "seed": job.seed,
+               "splits": split_lists(plan.splits), "keys": {str(i): k for i, k in enumerate(plan.keys)}}),
+    )  # fmt: skip
+    atomic_write_text(layout.manifest_path, dumps(manifest))  # last: its presence marks a dataset
+    return layout
+
+
+def shard_indices(n: int, shard: tuple[int, int]) -> list[int]:
+    """Indices of shard i of N: every N-th index starting at i (balances cheap and costly samples)."""
+    i, count = shard
+    return list(range(i, n, count))
+
+
+def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
+    """Render the job's missing samples and finalize; returns a summary with timings."""
+    validate_job(job)
+    plan = make_plan(job)
+    backend = create_backend(job.backend, plan.model, quality=job.quality, device=job.device)
+    layout = prepare_output(job, plan)
+    done = existing_sample_ids(layout)
+    todo = [i for i in shard_indices(job.n, job.shard) if i not in done]
+    t0 = time.perf_counter()
+    render_s = 0.0
+    bar = tqdm(total=len(todo), unit="img", disable=not progress, file=sys.stderr, desc="render")
+    try:
+        for i in todo:
+            spec = plan.specs[i]
+            t = time.perf_counter()
+            buffers = backend.render(spec)
+            render_s += time.perf_counter() - t
+            write_sample(layout, spec, buffers, annotate(spec, buffers), plan.splits[i], job.write)
+            bar.update(1)
+    finally:
+        bar.close()
+        backend.close()
+    total_s = time.perf_counter() - t0
+    n_done = finalize(layout)
+    return {
+        "rendered": len(todo),
+        "skipped": len(done),
+        "complete": n_done,
+        "total_s": total_s,
+        "render_s": render_s,
+        "splits": {s: plan.splits.count(s) for s in SPLITS},
+    }

@@ -1,0 +1,7 @@
+"""Scene sampling: SceneSpec data, per-factor random streams, config. No renderer imports here."""
+
+from scgen.scenes.config import load_config
+from scgen.scenes.sampler import sample_scene
+from scgen.scenes.spec import SceneSpec
+
+__all__ = ["SceneSpec", "load_config", "sample_scene"]
