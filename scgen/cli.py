@@ -48,28 +48,70 @@ def main() -> None:
 
 @main.command()
 @click.option("--n", "n", type=int, required=True, help="Number of samples (sample ids 0..n-1).")
-@click.option("--out", type=click.Path(path_type=Path), required=True, help="Dataset folder (created or resumed).")
-@click.option("--backend", default="blender", show_default=True, help="Renderer: blender (Cycles) or mitsuba.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Dataset seed: sample i of seed s never changes.")
-@click.option("--model", "model_path", type=click.Path(path_type=Path), default=None,
-              help="Target mesh (OBJ/PLY/GLB/STL); default: the bundled spacecraft.")
-@click.option("--keep-scale", is_flag=True, help="Keep the mesh's own scale (metres) instead of a 0.2 m diameter.")
-@click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,
-              help="TOML/YAML file overriding any sampling distribution (see docs/config.md).")
+@click.option(
+    "--out", type=click.Path(path_type=Path), required=True, help="Dataset folder (created or resumed)."
+)
+@click.option(
+    "--backend", default="blender", show_default=True, help="Renderer: blender (Cycles) or mitsuba."
+)
+@click.option(
+    "--seed", type=int, default=0, show_default=True, help="Dataset seed: sample i of seed s never changes."
+)
+@click.option(
+    "--model",
+    "model_path",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Target mesh (OBJ/PLY/GLB/STL); default: the bundled spacecraft.",
+)
+@click.option(
+    "--keep-scale", is_flag=True, help="Keep the mesh's own scale (metres) instead of a 0.2 m diameter."
+)
+@click.option(
+    "--config",
+    "config_path",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="TOML/YAML file overriding any sampling distribution (see docs/config.md).",
+)
 @click.option("--resolution", default=None, help="Image size WxH (default 640x480); keeps the field of view.")
 @click.option("--quality", default="default", show_default=True, help="draft | default | high.")
 @click.option("--device", default="auto", show_default=True, help="Blender device: auto | cpu | gpu.")
-@click.option("--split-by", type=click.Choice(["factors", "random"]), default="factors", show_default=True,
-              help="Split whole factor combinations (test configurations unseen in training) or images.")
-@click.option("--split", "split_text", default="0.7,0.1,0.2", show_default=True, help="train,val,test ratios.")
+@click.option(
+    "--split-by",
+    type=click.Choice(["factors", "random"]),
+    default="factors",
+    show_default=True,
+    help="Split whole factor combinations (test configurations unseen in training) or images.",
+)
+@click.option(
+    "--split", "split_text", default="0.7,0.1,0.2", show_default=True, help="train,val,test ratios."
+)
 @click.option("--shard", "shard_text", default="0/1", show_default=True, help="Render only shard i of N.")
 @click.option("--rgb-format", type=click.Choice(["png", "jpg"]), default="png", show_default=True)
 @click.option("--xyz-dtype", type=click.Choice(["float16", "float32"]), default="float16", show_default=True)
 @click.option("--save-depth", is_flag=True, help="Also write BOP uint16 depth maps.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @one_line_errors
-def render(n, out, backend, seed, model_path, keep_scale, config_path, resolution, quality, device, split_by,
-           split_text, shard_text, rgb_format, xyz_dtype, save_depth, quiet) -> None:
+def render(
+    n,
+    out,
+    backend,
+    seed,
+    model_path,
+    keep_scale,
+    config_path,
+    resolution,
+    quality,
+    device,
+    split_by,
+    split_text,
+    shard_text,
+    rgb_format,
+    xyz_dtype,
+    save_depth,
+    quiet,
+) -> None:
     """Render a dataset: RGB, masks, xyz maps, BOP JSON, metadata.csv and splits.json."""
     from scgen.runner import RenderJob, run_render
     from scgen.splits import parse_ratios
@@ -104,3 +146,67 @@ def validate(dataset: Path) -> None:
             click.echo(f"FAIL {p}")
         raise click.ClickException(f"{dataset}: {len(problems)} problem(s) in {n} samples")
     click.echo(f"OK {dataset}: {n} samples pass every check")
+
+
+@main.command()
+@click.argument("dataset", type=click.Path(path_type=Path))
+@click.option("--split", default=None, help="Only this split (train | val | test); default: every split.")
+@click.option(
+    "--json", "json_path", type=click.Path(path_type=Path), default=None, help="Write the stats as JSON."
+)
+@click.option(
+    "--csv", "csv_path", type=click.Path(path_type=Path), default=None, help="Write the stats as CSV."
+)
+@click.option(
+    "--plots",
+    "plots_dir",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Write pose-coverage and distance histograms (PNG) here.",
+)
+@click.option(
+    "--min-group",
+    type=int,
+    default=500,
+    show_default=True,
+    help="Eligibility minimum per group (the paper's rule).",
+)
+@click.option(
+    "--sample-groups",
+    type=int,
+    default=None,
+    help="Write, per group, N sample ids for group-wise evaluation (of --split, default test).",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of --sample-groups.")
+@click.option(
+    "--groups-out",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Where --sample-groups writes (default DATASET/groups_SPLIT_nN_sS.json).",
+)
+@one_line_errors
+def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_groups, seed, groups_out) -> None:
+    """Group counts of the robustness factors: illumination, shadow, occlusion, background, distance."""
+    import json
+
+    from scgen.atomic import atomic_write_text
+    from scgen.stats import compute_stats, format_table, to_csv, write_plots
+    from scgen.stats import sample_groups as draw_groups
+
+    result = compute_stats(dataset, split, min_group)
+    click.echo(format_table(result))
+    if json_path:
+        atomic_write_text(json_path, json.dumps(result, indent=1) + "\n")
+    if csv_path:
+        atomic_write_text(csv_path, to_csv(result))
+    if plots_dir:
+        for p in write_plots(dataset, split, plots_dir):
+            click.echo(f"wrote {p}")
+    if sample_groups is not None:
+        if sample_groups <= 0:
+            raise ScgenError(f"--sample-groups must be positive, got {sample_groups}")
+        which = split or "test"
+        groups = draw_groups(dataset, which, sample_groups, seed)
+        path = groups_out or Path(dataset) / f"groups_{which}_n{sample_groups}_s{seed}.json"
+        atomic_write_text(path, json.dumps(groups, indent=1) + "\n")
+        click.echo(f"wrote {path}")

@@ -85,6 +85,8 @@ def read_metadata(root: str | Path) -> list[dict[str, str]]:
     """Rows of metadata.csv (strings; callers convert the columns they use)."""
     layout, _ = open_dataset(root)
     if not layout.metadata_path.is_file():
-        raise ScgenError(f"dataset {root} has no metadata.csv: the render did not finish (re-run it to resume)")
+        raise ScgenError(
+            f"dataset {root} has no metadata.csv: the render did not finish (re-run it to resume)"
+        )
     with open(layout.metadata_path, newline="") as f:
         return list(csv.DictReader(f))

@@ -67,19 +67,16 @@ class TargetModel:
 
 def mesh_diameter(vertices: np.ndarray) -> float:
     """Largest distance between two vertices (exact, via the convex hull)."""
-    pts = np.asarray(vertices, dtype=np.float64)
-    try:
-        pts = pts[trimesh.convex.convex_hull(pts).vertices] if len(pts) > 4 else pts
-    except Exception:  # degenerate (flat) point sets have no 3D hull: use all points
-        pass
-    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(-1) if len(pts) < 4000 else None
-    if d2 is None:
-        return float(max(np.linalg.norm(pts - p, axis=1).max() for p in pts))
-    return float(np.sqrt(d2.max()))
+    pts = np.unique(np.asarray(vertices, dtype=np.float64), axis=0)
+    if len(pts) > 4:  # the farthest pair lies on the hull (trimesh joggles flat sets with QJ)
+        pts = np.asarray(trimesh.convex.convex_hull(pts).vertices)
+    return float(max(np.linalg.norm(pts - p, axis=1).max() for p in pts))
 
 
 def normalise_parts(
-    parts: list[tuple[str, trimesh.Trimesh]], diameter_m: float | None = DEFAULT_DIAMETER_M, name: str = "model"
+    parts: list[tuple[str, trimesh.Trimesh]],
+    diameter_m: float | None = DEFAULT_DIAMETER_M,
+    name: str = "model",
 ) -> TargetModel:
     """Centre the parts on their joint bbox centre and scale them to `diameter_m` (None keeps the scale)."""
     parts = [(mat, m.copy()) for mat, m in parts if len(m.faces) > 0]
@@ -115,11 +112,14 @@ def load_mesh_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
     if not path.exists():
         raise ScgenError(f"mesh not found: {path}")
     if path.suffix.lower() not in (".obj", ".ply", ".glb", ".gltf", ".stl", ".off"):
-        raise ScgenError(f"unsupported mesh format '{path.suffix}' for {path} (use OBJ, PLY, GLB, GLTF or STL)")
+        raise ScgenError(
+            f"unsupported mesh format '{path.suffix}' for {path} (use OBJ, PLY, GLB, GLTF or STL)"
+        )
     try:
         loaded = trimesh.load(str(path), force="scene", process=False)
     except Exception as exc:  # trimesh raises many types for corrupt files
-        raise ScgenError(f"cannot read mesh {path}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ScgenError(f"cannot read mesh {path}: {reason}") from None
     parts = []
     for geom_name, geom in loaded.geometry.items():
         if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:

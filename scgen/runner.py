@@ -125,7 +125,9 @@ def prepare_output(job: RenderJob, plan: Plan) -> Layout:
         diff = sorted(k for k in manifest.keys() | old.keys() if manifest.get(k) != old.get(k))
         if diff:
             details = ", ".join(f"{k}: {old.get(k)!r} on disk vs {manifest.get(k)!r} now" for k in diff)
-            raise ScgenError(f"refusing to resume into {job.out}: it was made with different settings ({details})")
+            raise ScgenError(
+                f"refusing to resume into {job.out}: it was made with different settings ({details})"
+            )
         remove_stale_temporaries(layout.root)
         return layout
     layout.root.mkdir(parents=True, exist_ok=True)

@@ -24,13 +24,45 @@ def viewpoint_cells() -> np.ndarray:
     """The 20 face centres of a regular icosahedron: the documented viewpoint partition of S^2."""
     p = (1 + 5**0.5) / 2
     verts = np.array(
-        [[-1, p, 0], [1, p, 0], [-1, -p, 0], [1, -p, 0], [0, -1, p], [0, 1, p],
-         [0, -1, -p], [0, 1, -p], [p, 0, -1], [p, 0, 1], [-p, 0, -1], [-p, 0, 1]], float
+        [
+            [-1, p, 0],
+            [1, p, 0],
+            [-1, -p, 0],
+            [1, -p, 0],
+            [0, -1, p],
+            [0, 1, p],
+            [0, -1, -p],
+            [0, 1, -p],
+            [p, 0, -1],
+            [p, 0, 1],
+            [-p, 0, -1],
+            [-p, 0, 1],
+        ],
+        float,
     )
     verts /= np.linalg.norm(verts, axis=1, keepdims=True)
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
-             (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5),
-             (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    faces = [
+        (0, 11, 5),
+        (0, 5, 1),
+        (0, 1, 7),
+        (0, 7, 10),
+        (0, 10, 11),
+        (1, 5, 9),
+        (5, 11, 4),
+        (11, 10, 2),
+        (10, 7, 6),
+        (7, 1, 8),
+        (3, 9, 4),
+        (3, 4, 2),
+        (3, 2, 6),
+        (3, 6, 8),
+        (3, 8, 9),
+        (4, 9, 5),
+        (2, 4, 11),
+        (6, 2, 10),
+        (8, 6, 7),
+        (9, 8, 1),
+    ]
     centres = verts[np.array(faces)].mean(axis=1)
     return centres / np.linalg.norm(centres, axis=1, keepdims=True)
 
@@ -65,9 +97,7 @@ def _stable_hash(seed: int, text: str) -> int:
     return int.from_bytes(hashlib.sha256(f"{seed}:{text}".encode()).digest()[:8], "big")
 
 
-def plan_splits(
-    keys: Sequence[str], ratios: Sequence[float], seed: int, mode: str = "factors"
-) -> list[str]:
+def plan_splits(keys: Sequence[str], ratios: Sequence[float], seed: int, mode: str = "factors") -> list[str]:
     """The split name of every sample index (len(keys) samples)."""
     n = len(keys)
     targets = np.asarray(ratios, float) * n
@@ -99,7 +129,9 @@ def plan_splits(
 def leakage(keys: Sequence[str], split_of: Sequence[str]) -> dict[str, int]:
     """Number of combination keys shared by each pair of splits (0 everywhere for a factor split)."""
     sets = {s: {k for k, sp in zip(keys, split_of, strict=True) if sp == s} for s in SPLITS}
-    return {f"{a}-{b}": len(sets[a] & sets[b]) for a, b in (("train", "val"), ("train", "test"), ("val", "test"))}
+    return {
+        f"{a}-{b}": len(sets[a] & sets[b]) for a, b in (("train", "val"), ("train", "test"), ("val", "test"))
+    }
 
 
 def split_lists(split_of: Iterable[str]) -> dict[str, list[int]]:

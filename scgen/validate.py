@@ -105,7 +105,7 @@ def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: d
     if share < REPROJ_MIN_SHARE:
         out.append(f"xyz reprojects within {REPROJ_TOL_PX} px for only {share:.1%} of visible pixels")
     tol = 0.01 * float(np.max(hi - lo))
-    outside = ((C < lo - tol) | (C > hi + tol)).any(axis=1)
+    outside = ((lo - tol > C) | (hi + tol < C)).any(axis=1)
     if outside.any():
         out.append(f"{int(outside.sum())} xyz values outside the model bounding box")
     return out

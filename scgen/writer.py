@@ -157,8 +157,8 @@ def build_record(
     return {
         "sample_id": spec.index,
         "split": split,
-        "scene_gt": [{"cam_R_m2c": [float(x) for x in R.reshape(9)], "cam_t_m2c": [float(x) for x in t * 1000.0],
-                      "obj_id": 1}],
+        "scene_gt": [{"cam_R_m2c": [float(x) for x in R.reshape(9)],
+                      "cam_t_m2c": [float(x) for x in t * 1000.0], "obj_id": 1}],
         "scene_camera": {"cam_K": list(spec.camera.K), "depth_scale": depth_scale,
                          "exposure_ev": spec.camera.exposure_ev},
         "scene_gt_info": [{"bbox_obj": ann.bbox_obj, "bbox_visib": ann.bbox_visib,

@@ -86,7 +86,9 @@ def build_parts() -> list[tuple[str, trimesh.Trimesh]]:
     parts.append(_nozzle([0.05, -0.05, -0.5], 0.14, 0.28, "dark_metal"))
     for x, y in ((0.36, 0.41), (-0.36, 0.41), (0.36, -0.41), (-0.3, -0.41)):  # RCS thrusters
         parts.append(_nozzle([x, y, -0.5], 0.04, 0.08, "brushed_metal"))
-    parts.append(_cylinder([0.4, -0.3, 0.3], [0.75, -0.3, 0.55], 0.01, "brushed_metal", 8))  # magnetometer boom
+    parts.append(
+        _cylinder([0.4, -0.3, 0.3], [0.75, -0.3, 0.55], 0.01, "brushed_metal", 8)
+    )  # magnetometer boom
     parts.append(_box([0.06, 0.06, 0.06], [0.75, -0.3, 0.55], "mli_silver"))
     return parts
 

@@ -62,7 +62,9 @@ def _nebula(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
     hue = rng.uniform(0, 1, 3).astype(np.float32)
     tint = 0.4 + 0.6 * hue / hue.max()
     band = _smooth_noise(rng, h, w, octaves=3, base=2)
-    return (0.12 * density[..., None] * tint + 0.03 * band[..., None] * np.array([0.8, 0.8, 1.0])).astype(np.float32)
+    return (0.12 * density[..., None] * tint + 0.03 * band[..., None] * np.array([0.8, 0.8, 1.0])).astype(
+        np.float32
+    )
 
 
 def _glare(rng: np.random.Generator, h: int, w: int) -> np.ndarray:

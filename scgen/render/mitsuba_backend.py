@@ -50,12 +50,24 @@ def _bsdf(material: str) -> dict:
     if material == "brushed_metal":
         return {"type": "roughconductor", "material": "Al", "alpha": 0.15}
     if material == "solar_cell":
-        return {"type": "principled", "base_color": {"type": "rgb", "value": [0.02, 0.03, 0.09]},
-                "roughness": 0.15, "specular": 0.6}
+        return {
+            "type": "principled",
+            "base_color": {"type": "rgb", "value": [0.02, 0.03, 0.09]},
+            "roughness": 0.15,
+            "specular": 0.6,
+        }
     if material == "dark_metal":
-        return {"type": "principled", "base_color": {"type": "rgb", "value": [0.05, 0.05, 0.055]},
-                "metallic": 0.5, "roughness": 0.4}
-    return {"type": "principled", "base_color": {"type": "rgb", "value": [0.75, 0.75, 0.72]}, "roughness": 0.6}
+        return {
+            "type": "principled",
+            "base_color": {"type": "rgb", "value": [0.05, 0.05, 0.055]},
+            "metallic": 0.5,
+            "roughness": 0.4,
+        }
+    return {
+        "type": "principled",
+        "base_color": {"type": "rgb", "value": [0.75, 0.75, 0.72]},
+        "roughness": 0.6,
+    }
 
 
 def _mesh(name: str, mesh: trimesh.Trimesh, material: str) -> mi.Mesh:
@@ -196,7 +208,7 @@ def _pixel_rays(K: np.ndarray, W: int, H: int) -> np.ndarray:
 
 
 def _cast(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ray length, index of the hit shape in `shapes` (-1 = miss) and geometric normal, rays from the origin."""
+    """Ray length, index of the hit shape in `shapes` (-1 = miss) and geometric normal, rays from origin."""
     o = mi.Point3f(0.0, 0.0, 0.0)
     ray = mi.Ray3f(o, mi.Vector3f(dirs[:, 0], dirs[:, 1], dirs[:, 2]))
     si = scene.ray_intersect(ray)

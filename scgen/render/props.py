@@ -37,7 +37,9 @@ def _local_mesh(shape: str, size: np.ndarray, rng: np.random.Generator) -> trime
         h = 0.5 * size[1]
         r = 0.04 * size[1]
         for y, z in ((-h, -h), (-h, h), (h, -h), (h, h)):
-            members.append(trimesh.creation.cylinder(radius=r, segment=[[-size[0] / 2, y, z], [size[0] / 2, y, z]]))
+            members.append(
+                trimesh.creation.cylinder(radius=r, segment=[[-size[0] / 2, y, z], [size[0] / 2, y, z]])
+            )
         for x in np.linspace(-size[0] / 2, size[0] / 2, 4):
             members.append(trimesh.creation.cylinder(radius=r, segment=[[x, -h, -h], [x, h, h]]))
             members.append(trimesh.creation.cylinder(radius=r, segment=[[x, -h, h], [x, h, -h]]))

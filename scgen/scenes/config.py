@@ -183,7 +183,11 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
 
 
 def _check_range(name: str, value: Any, low: float) -> None:
-    ok = isinstance(value, (list, tuple)) and len(value) == 2 and all(isinstance(v, (int, float)) for v in value)
+    ok = (
+        isinstance(value, (list, tuple))
+        and len(value) == 2
+        and all(isinstance(v, (int, float)) for v in value)
+    )
     if not ok or not (low <= value[0] <= value[1]):
         raise ScgenError(f"{name} must be [min, max] with {low} <= min <= max, got {value!r}")
 

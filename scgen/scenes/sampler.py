@@ -96,11 +96,22 @@ def _sample_shadow_caster(
     a, b = orthonormal_basis(s)
     phi = rng.uniform(0, 2 * np.pi)
     offset = rng.uniform(*cfg["offset_diam"]) * diameter
-    centre = t + s * rng.uniform(*cfg["distance_diam"]) * diameter + offset * (np.cos(phi) * a + np.sin(phi) * b)
+    centre = (
+        t + s * rng.uniform(*cfg["distance_diam"]) * diameter + offset * (np.cos(phi) * a + np.sin(phi) * b)
+    )
     side = rng.uniform(*cfg["size_diam"]) * diameter
     size = (side, side * rng.uniform(0.4, 1.0), 0.01 * diameter)
     R = look_rotation(s, rng)
-    return [PropSpec("shadow_caster", "panel", size, Pose.from_arrays(R, centre), "dark_metal", int(rng.integers(2**31)))]
+    return [
+        PropSpec(
+            "shadow_caster",
+            "panel",
+            size,
+            Pose.from_arrays(R, centre),
+            "dark_metal",
+            int(rng.integers(2**31)),
+        )
+    ]
 
 
 def _sample_background(

@@ -119,13 +119,19 @@ class SceneSpec:
         return SceneSpec(
             seed=int(d["seed"]),
             index=int(d["index"]),
-            camera=CameraSpec(int(cam["width"]), int(cam["height"]), tuple(cam["K"]), float(cam["exposure_ev"])),
+            camera=CameraSpec(
+                int(cam["width"]), int(cam["height"]), tuple(cam["K"]), float(cam["exposure_ev"])
+            ),
             target=pose(d["target"]),
             distance_m=float(d["distance_m"]),
             sun=SunSpec(tuple(d["sun"]["direction"]), d["sun"]["level"], float(d["sun"]["irradiance"])),
-            background=BackgroundSpec(d["background"]["kind"], int(d["background"]["seed"]), d["background"]["params"]),
+            background=BackgroundSpec(
+                d["background"]["kind"], int(d["background"]["seed"]), d["background"]["params"]
+            ),
             props=tuple(
-                PropSpec(p["role"], p["shape"], tuple(p["size"]), pose(p["pose"]), p["material"], int(p["seed"]))
+                PropSpec(
+                    p["role"], p["shape"], tuple(p["size"]), pose(p["pose"]), p["material"], int(p["seed"])
+                )
                 for p in d["props"]
             ),
             requested_occlusion=d["requested_occlusion"],

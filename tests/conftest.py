@@ -1,0 +1,24 @@
+"""Shared fixtures: small real datasets rendered with the Mitsuba backend (fast on CPU)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from scgen.runner import RenderJob, run_render
+
+SMALL = (320, 240)
+
+
+def render_dataset(out: Path, n: int, seed: int = 0, **kwargs) -> Path:
+    """Render n samples at 320x240 with Mitsuba, the way `scgen render` does."""
+    job = RenderJob(out=out, n=n, seed=seed, backend="mitsuba", quality="draft", resolution=SMALL, **kwargs)
+    run_render(job, progress=False)
+    return out
+
+
+@pytest.fixture(scope="session")
+def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """12 samples of seed 0: shared, read-only for the tests that use it."""
+    return render_dataset(tmp_path_factory.mktemp("ds") / "small", n=12)

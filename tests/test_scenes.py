@@ -1,0 +1,84 @@
+"""Scene sampling: determinism, per-factor streams, config handling."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from scgen.errors import ScgenError
+from scgen.scenes import SceneSpec, load_config, sample_scene
+from scgen.scenes.config import distance_range_m
+
+
+def test_same_seed_same_spec_and_json_round_trip():
+    cfg = load_config()
+    a = sample_scene(3, 7, cfg, 0.2)
+    b = sample_scene(3, 7, cfg, 0.2)
+    assert a == b
+    assert SceneSpec.from_dict(json.loads(json.dumps(a.to_dict()))) == a
+    assert sample_scene(4, 7, cfg, 0.2) != a
+
+
+def test_changing_one_factor_distribution_leaves_the_others_unchanged():
+    base = load_config()
+    lit = load_config(overrides={"illumination": {"probs": {"weak": 1.0, "normal": 0.0, "strong": 0.0}}})
+    for i in range(30):
+        a, b = sample_scene(0, i, base, 0.2), sample_scene(0, i, lit, 0.2)
+        assert b.sun.level == "weak"
+        assert a.target == b.target and a.background == b.background and a.props == b.props
+
+
+def test_pose_is_uniform_on_so3_and_target_stays_in_frame():
+    cfg = load_config()
+    specs = [sample_scene(1, i, cfg, 0.2) for i in range(600)]
+    # for a uniform rotation, each column's z-component is uniform on [-1, 1]: mean 0, variance 1/3
+    zs = np.array([s.target.R_mat[2, 0] for s in specs])
+    assert abs(zs.mean()) < 0.08 and abs(zs.var() - 1 / 3) < 0.05
+    K = specs[0].camera.K_mat
+    for s in specs:
+        uvw = K @ s.target.t_vec
+        u, v = uvw[:2] / uvw[2]
+        assert 0 <= u <= 639 and 0 <= v <= 479
+
+
+def test_default_distance_range_gives_60_to_300_px_diameter():
+    cfg = load_config()
+    lo, hi = distance_range_m(cfg, 0.2)
+    assert 600 * 0.2 / lo == pytest.approx(300) and 600 * 0.2 / hi == pytest.approx(60)
+
+
+def test_every_factor_is_labelled():
+    s = sample_scene(0, 0, load_config(), 0.2)
+    assert s.sun.level in ("weak", "normal", "strong")
+    assert s.background.kind in ("clean", "complex", "earth", "cluttered")
+    assert s.requested_occlusion in ("none", "slight", "moderate", "heavy")
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"sun": {"x": 1}}, "unknown config key 'sun'"),
+        ({"illumination": {"nope": 1}}, "unknown config key 'illumination.nope'"),
+        ({"distance": {"range_m": [2.0, 1.0]}}, "distance.range_m"),
+        ({"illumination": {"probs": {"weak": 0.5, "normal": 0.1, "strong": 0.1}}}, "sum to 1"),
+        ({"camera": {"width": 0}}, "camera.width"),
+    ],
+)
+def test_bad_config_is_named(overrides, message):
+    with pytest.raises(ScgenError, match=message):
+        load_config(overrides=overrides)
+
+
+def test_resolution_keeps_field_of_view(tmp_path):
+    cfg = load_config(resolution=(320, 240))
+    assert cfg["camera"]["fx"] == 300 and cfg["camera"]["cx"] == 159.5
+    assert distance_range_m(cfg, 0.2) == pytest.approx(distance_range_m(load_config(), 0.2))
+
+
+def test_config_file_toml_and_yaml(tmp_path):
+    (tmp_path / "c.toml").write_text("[shadow]\ncaster_prob = 1.0\n")
+    (tmp_path / "c.yaml").write_text("shadow:\n  caster_prob: 0.0\n")
+    assert load_config(tmp_path / "c.toml")["shadow"]["caster_prob"] == 1.0
+    assert load_config(tmp_path / "c.yaml")["shadow"]["caster_prob"] == 0.0
