@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import os
 import re
 from pathlib import Path
 
@@ -88,6 +89,15 @@ def main() -> None:
     "--split", "split_text", default="0.7,0.1,0.2", show_default=True, help="train,val,test ratios."
 )
 @click.option("--shard", "shard_text", default="0/1", show_default=True, help="Render only shard i of N.")
+@click.option("--workers", type=int, default=None, help="Worker processes/actors (default: CPU cores).")
+@click.option(
+    "--executor",
+    type=click.Choice(["local", "ray"]),
+    default="local",
+    show_default=True,
+    help="local processes, or Ray actors on a cluster (pip install 'scgen[ray]').",
+)
+@click.option("--ray-address", default=None, help="Ray cluster address (default: start a local Ray).")
 @click.option("--rgb-format", type=click.Choice(["png", "jpg"]), default="png", show_default=True)
 @click.option("--xyz-dtype", type=click.Choice(["float16", "float32"]), default="float16", show_default=True)
 @click.option("--save-depth", is_flag=True, help="Also write BOP uint16 depth maps.")
@@ -107,6 +117,9 @@ def render(
     split_by,
     split_text,
     shard_text,
+    workers,
+    executor,
+    ray_address,
     rgb_format,
     xyz_dtype,
     save_depth,
@@ -122,6 +135,7 @@ def render(
         out=out, n=n, seed=seed, backend=backend, quality=quality, device=device, model_path=model_path,
         keep_scale=keep_scale, config_path=config_path, resolution=res, split_by=split_by,
         ratios=parse_ratios(split_text), shard=parse_shard(shard_text),
+        workers=workers or os.cpu_count() or 1, executor=executor, ray_address=ray_address,
         write=WriteOptions(rgb_format=rgb_format, xyz_dtype=xyz_dtype, save_depth=save_depth),
     )  # fmt: skip
     summary = run_render(job, progress=not quiet)
@@ -210,3 +224,19 @@ def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_grou
         path = groups_out or Path(dataset) / f"groups_{which}_n{sample_groups}_s{seed}.json"
         atomic_write_text(path, json.dumps(groups, indent=1) + "\n")
         click.echo(f"wrote {path}")
+
+
+@main.command()
+@click.argument("out", type=click.Path(path_type=Path))
+@click.argument("shards", nargs=-1, required=True, type=click.Path(path_type=Path))
+@one_line_errors
+def merge(out: Path, shards: tuple[Path, ...]) -> None:
+    """Join shard outputs (same seed, config and model) into OUT, as if rendered in one run."""
+    from scgen.merge import merge_shards
+
+    n, total = merge_shards(out, list(shards))
+    click.echo(f"{out}: {n}/{total} samples after merging {len(shards)} shard folder(s)")
+
+
+if __name__ == "__main__":
+    main()

@@ -14,16 +14,17 @@ from typing import Any
 from tqdm import tqdm
 
 import scgen
-from scgen.annotate import annotate
 from scgen.atomic import atomic_write_text, remove_stale_temporaries
 from scgen.dataset import FORMAT, MANIFEST, Layout, dumps, read_json
 from scgen.errors import ScgenError
+from scgen.executors import run_local, run_ray
 from scgen.model import TargetModel, load_target, write_model_dir
 from scgen.render.base import BACKENDS, create_backend
 from scgen.scenes import load_config, sample_scene
 from scgen.scenes.spec import SceneSpec
 from scgen.splits import SPLITS, plan_splits, split_lists
-from scgen.writer import WriteOptions, existing_sample_ids, finalize, spec_key, write_sample
+from scgen.worker import Done, Task, WorkerSettings
+from scgen.writer import WriteOptions, existing_sample_ids, finalize, spec_key
 
 QUALITIES = ("draft", "default", "high")
 
@@ -46,6 +47,9 @@ class RenderJob:
     split_by: str = "factors"
     ratios: tuple[float, float, float] = (0.7, 0.1, 0.2)
     shard: tuple[int, int] = (0, 1)
+    workers: int = 1
+    executor: str = "local"
+    ray_address: str | None = None
     write: WriteOptions = field(default_factory=WriteOptions)
 
 
@@ -68,6 +72,10 @@ def validate_job(job: RenderJob) -> None:
         raise ScgenError(f"unknown backend '{job.backend}' (choose from {', '.join(BACKENDS)})")
     if job.quality not in QUALITIES:
         raise ScgenError(f"unknown quality '{job.quality}' (choose from {', '.join(QUALITIES)})")
+    if job.workers <= 0:
+        raise ScgenError(f"--workers must be positive, got {job.workers}")
+    if job.executor not in ("local", "ray"):
+        raise ScgenError(f"unknown executor '{job.executor}' (choose local or ray)")
     i, count = job.shard
     if count <= 0 or not 0 <= i < count:
         raise ScgenError(f"--shard must be i/N with 0 <= i < N, got {i}/{count}")
@@ -156,31 +164,44 @@ def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
     """Render the job's missing samples and finalize; returns a summary with timings."""
     validate_job(job)
     plan = make_plan(job)
-    backend = create_backend(job.backend, plan.model, quality=job.quality, device=job.device)
+    # fail fast (before writing anything) when the renderer cannot start, e.g. bpy missing
+    create_backend(job.backend, plan.model, quality=job.quality, device=job.device).close()
     layout = prepare_output(job, plan)
     done = existing_sample_ids(layout)
-    todo = [i for i in shard_indices(job.n, job.shard) if i not in done]
+    tasks = [
+        Task(i, plan.splits[i], plan.specs[i].to_dict())
+        for i in shard_indices(job.n, job.shard)
+        if i not in done
+    ]
+    settings = WorkerSettings(
+        out=job.out, backend=job.backend, quality=job.quality, device=job.device, model_path=job.model_path,
+        keep_scale=job.keep_scale, write=job.write, threads=max(1, (os.cpu_count() or 1) // job.workers),
+    )  # fmt: skip
+    timings = {"render_s": 0.0, "other_s": 0.0}
+    bar = tqdm(
+        total=len(tasks), unit="img", disable=not progress, file=sys.stderr, desc="render", smoothing=0.1
+    )
+
+    def on_done(d: Done) -> None:
+        timings["render_s"] += d.render_s
+        timings["other_s"] += d.other_s
+        bar.update(1)
+
     t0 = time.perf_counter()
-    render_s = 0.0
-    bar = tqdm(total=len(todo), unit="img", disable=not progress, file=sys.stderr, desc="render")
     try:
-        for i in todo:
-            spec = plan.specs[i]
-            t = time.perf_counter()
-            buffers = backend.render(spec)
-            render_s += time.perf_counter() - t
-            write_sample(layout, spec, buffers, annotate(spec, buffers), plan.splits[i], job.write)
-            bar.update(1)
+        if job.executor == "ray":
+            gpus = 1.0 if job.device == "gpu" else 0.0
+            run_ray(tasks, settings, job.workers, job.ray_address, gpus, on_done)
+        else:
+            run_local(tasks, settings, job.workers, on_done)
     finally:
         bar.close()
-        backend.close()
-    total_s = time.perf_counter() - t0
-    n_done = finalize(layout)
+        n_done = finalize(layout)  # whatever is complete stays usable, even after a failure
     return {
-        "rendered": len(todo),
+        "rendered": len(tasks),
         "skipped": len(done),
         "complete": n_done,
-        "total_s": total_s,
-        "render_s": render_s,
+        "total_s": time.perf_counter() - t0,
+        **timings,
         "splits": {s: plan.splits.count(s) for s in SPLITS},
     }

@@ -44,14 +44,19 @@ class Backend(Protocol):
     def close(self) -> None: ...
 
 
-def create_backend(name: str, model: TargetModel, quality: str = "default", device: str = "auto") -> Backend:
-    """Instantiate a backend by name; raises ScgenError for unknown names or a missing renderer."""
+def create_backend(
+    name: str, model: TargetModel, quality: str = "default", device: str = "auto", threads: int | None = None
+) -> Backend:
+    """Instantiate a backend by name; raises ScgenError for unknown names or a missing renderer.
+
+    `threads` caps the renderer's CPU threads (several workers share the cores); None = all cores.
+    """
     if name == "mitsuba":
         from scgen.render.mitsuba_backend import MitsubaBackend
 
-        return MitsubaBackend(model, quality=quality)
+        return MitsubaBackend(model, quality=quality, threads=threads)
     if name == "blender":
-        from scgen.render.blender import BlenderBackend  # type: ignore[import-not-found]
+        from scgen.render.blender import BlenderBackend
 
-        return BlenderBackend(model, quality=quality, device=device)
+        return BlenderBackend(model, quality=quality, device=device, threads=threads)
     raise ScgenError(f"unknown backend '{name}' (choose from {', '.join(BACKENDS)})")

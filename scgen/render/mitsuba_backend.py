@@ -84,8 +84,10 @@ class MitsubaBackend:
 
     name = "mitsuba"
 
-    def __init__(self, model: TargetModel, quality: str = "default") -> None:
+    def __init__(self, model: TargetModel, quality: str = "default", threads: int | None = None) -> None:
         self.variant = select_variant()
+        if threads is not None:
+            dr.set_thread_count(threads)
         self.model = model
         self.spp = QUALITY_SPP[quality]
 
