@@ -32,9 +32,9 @@ def main() -> None:
     rates = {k: images_per_second(args.backend, args.n, k, args.quality, tmp / f"w{k}") for k in (1, cores)}
     print(f"{args.backend} ({args.quality}, 640x480), {args.n} samples per run, {cores} cores")
     for k, r in rates.items():
-        print(f"  {k} worker(s): {r:.3f} images/s  ({1 / r:.2f} s/image incl. start-up, annotation, writing)")
-    print(f"  scaling: {rates[cores] / rates[1]:.2f}x with {cores} workers = {rates[cores] / rates[1] / cores:.2f} "
-          "of linear (one worker uses all cores itself, so this is the gain of process parallelism)")  # fmt: skip
+        print(f"  {k} worker(s): {r:.3f} images/s  ({1 / r:.2f} s/image, all included)")
+    gain = rates[cores] / rates[1]
+    print(f"  scaling: {gain:.2f}x with {cores} workers = {gain / cores:.2f} of linear")
 
 
 if __name__ == "__main__":
