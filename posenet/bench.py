@@ -1,0 +1,180 @@
+"""`posenet bench`: parameters, MACs and batch-1 latency of every variant, side by side on one device."""
+
+from __future__ import annotations
+
+import json
+import statistics
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import click
+import torch
+from torch.utils.flop_counter import FlopCounterMode
+
+from posenet.errors import PosenetError
+from posenet.models import VARIANTS, ModelConfig, PoseNet, build_model
+
+
+@dataclass(frozen=True)
+class BenchRow:
+    """One variant's measurements (or the paper's figures for it)."""
+
+    name: str
+    params_m: float
+    macs_g: float
+    latency_ms: float
+    fps: float
+
+
+# Paper Table 4 (RTX 4090, batch 1); the paper's "FLOPs" are MACs (reference gdrnet.md §6).
+PAPER: dict[str, BenchRow] = {
+    r.name: r
+    for r in (
+        BenchRow("gdrnet", 35.05, 11.42, 22.0, 45.45),
+        BenchRow("convnext", 47.22, 13.86, 24.3, 41.15),
+        BenchRow("afr", 47.67, 14.92, 27.0, 37.04),
+        BenchRow("pgsa", 47.29, 13.93, 24.8, 40.32),
+        BenchRow("gap-gdrnet", 47.75, 14.99, 27.8, 35.97),
+    )
+}
+
+
+def resolve_device(choice: str) -> torch.device:
+    """'auto' → cuda when available, else cpu; 'cuda' without a GPU is an error."""
+    if choice == "auto":
+        choice = "cuda" if torch.cuda.is_available() else "cpu"
+    if choice == "cuda" and not torch.cuda.is_available():
+        raise PosenetError("--device cuda requested but no CUDA device is available")
+    return torch.device(choice)
+
+
+def device_label(device: torch.device) -> str:
+    """Human-readable device name for the report."""
+    if device.type == "cuda":
+        return f"cuda ({torch.cuda.get_device_name(device)})"
+    return f"cpu ({torch.get_num_threads()} threads)"
+
+
+def dummy_inputs(config: ModelConfig, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """A batch-1 RoI image and coordinate map of the configured sizes."""
+    gen = torch.Generator().manual_seed(0)
+    img = torch.rand(1, 3, config.input_res, config.input_res, generator=gen)
+    coord = torch.rand(1, 2, config.output_res, config.output_res, generator=gen)
+    return img.to(device), coord.to(device)
+
+
+@torch.no_grad()
+def count_macs(model: PoseNet, inputs: tuple[torch.Tensor, torch.Tensor]) -> float:
+    """Multiply-accumulates of one forward, = FlopCounterMode FLOPs / 2 (conv, linear, matmul ops)."""
+    counter = FlopCounterMode(display=False)
+    with counter:
+        model(*inputs)
+    return counter.get_total_flops() / 2
+
+
+@torch.no_grad()
+def measure_latency_ms(
+    model: PoseNet, inputs: tuple[torch.Tensor, torch.Tensor], warmup: int, iters: int
+) -> float:
+    """Median wall time of `iters` forwards after `warmup` untimed ones (device-synchronised)."""
+    sync = torch.cuda.synchronize if inputs[0].is_cuda else (lambda: None)
+    for _ in range(warmup):
+        model(*inputs)
+    sync()
+    times = []
+    for _ in range(iters):
+        start = time.perf_counter()
+        model(*inputs)
+        sync()
+        times.append(time.perf_counter() - start)
+    return 1000 * statistics.median(times)
+
+
+def bench_variant(name: str, config: ModelConfig, device: torch.device, warmup: int, iters: int) -> BenchRow:
+    """Build `name` from random init and measure it in eval mode."""
+    model = build_model(name, config).to(device).eval()
+    inputs = dummy_inputs(config, device)
+    params = sum(p.numel() for p in model.parameters())
+    macs = count_macs(model, inputs)
+    latency = measure_latency_ms(model, inputs, warmup, iters)
+    return BenchRow(name, params / 1e6, macs / 1e9, latency, 1000 / latency)
+
+
+def run_bench(
+    names: list[str], device: torch.device, warmup: int = 3, iters: int = 10, smoke: bool = False
+) -> list[BenchRow]:
+    """Bench each variant in turn, freeing it before the next."""
+    rows = []
+    for name in names:
+        config = ModelConfig.smoke(name) if smoke else ModelConfig.paper(name)
+        rows.append(bench_variant(name, config, device, warmup, iters))
+        if device.type == "cuda":
+            torch.cuda.empty_cache()
+    return rows
+
+
+def _cell(value: float, paper: float | None, digits: int, bracket: bool) -> str:
+    ours = f"{value:7.{digits}f}"
+    if not bracket:
+        return ours
+    return f"{ours} ({paper:7.{digits}f})" if paper is not None else f"{ours} ({'-':>7})"
+
+
+def format_report(rows: list[BenchRow], device: str, paper: dict[str, BenchRow] = PAPER) -> str:
+    """Aligned table of ours with the paper's Table 4 in brackets, then the GAP/GDR latency ratio."""
+    header = "; (paper Table 4, RTX 4090)" if paper else ""
+    lines = [
+        f"device: {device}; batch 1; MACs = FLOPs/2 from torch.utils.flop_counter{header}",
+        f"{'variant':<11} {'params M':>17} {'MACs G':>17} {'latency ms':>17} {'FPS':>17}",
+    ]
+    for r in rows:
+        p = paper.get(r.name)
+        cells = [
+            _cell(getattr(r, field), p and getattr(p, field), digits, bracket=bool(paper))
+            for field, digits in (("params_m", 2), ("macs_g", 2), ("latency_ms", 1), ("fps", 2))
+        ]
+        lines.append(f"{r.name:<11} " + " ".join(f"{c:>17}" for c in cells))
+    by_name = {r.name: r for r in rows}
+    if {"gdrnet", "gap-gdrnet"} <= by_name.keys():
+        ours = by_name["gap-gdrnet"].latency_ms / by_name["gdrnet"].latency_ms
+        ratio = f"latency ratio gap-gdrnet / gdrnet: {ours:.2f}"
+        if paper:
+            ratio += f" (paper {paper['gap-gdrnet'].latency_ms / paper['gdrnet'].latency_ms:.2f}, GPU)"
+        lines.append(ratio)
+    return "\n".join(lines)
+
+
+@click.command("bench")
+@click.option(
+    "--variant",
+    "variants",
+    multiple=True,
+    type=click.Choice(list(VARIANTS)),
+    help="Variant to bench (repeatable); default: all.",
+)
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--warmup", type=click.IntRange(min=0), default=3, show_default=True, help="Untimed forwards.")
+@click.option("--iters", type=click.IntRange(min=1), default=10, show_default=True, help="Timed forwards.")
+@click.option("--threads", type=click.IntRange(min=1), help="CPU intra-op threads (default: torch's).")
+@click.option("--smoke", is_flag=True, help="Bench the reduced-width CPU presets instead of the paper's.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Also write JSON.")
+def bench(
+    variants: tuple[str, ...],
+    device: str,
+    warmup: int,
+    iters: int,
+    threads: int | None,
+    smoke: bool,
+    json_path: Path | None,
+) -> None:
+    """Params, MACs and batch-1 latency / FPS of the pose-network variants, from random init."""
+    if threads:
+        torch.set_num_threads(threads)
+    dev = resolve_device(device)
+    rows = run_bench(list(variants or VARIANTS), dev, warmup, iters, smoke)
+    label = device_label(dev)
+    click.echo(format_report(rows, label, paper={} if smoke else PAPER))
+    if json_path:
+        payload = {"device": label, "variants": [asdict(r) for r in rows]}
+        json_path.write_text(json.dumps(payload, indent=2) + "\n")

@@ -1,0 +1,82 @@
+"""One pose network class; every ablation row of the paper is a `ModelConfig` of it."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from posenet.errors import PosenetError
+
+from .afr import AFR
+from .backbone import Backbone
+from .config import VARIANTS, ModelConfig
+from .geo_head import GeoHead
+from .pnp import PatchPnP
+
+
+class PoseNet(nn.Module):
+    """Backbone → geometric head [AFR] → (mask, xyz, region) → Patch-PnP [PGSA] → (rot6d, SITE).
+
+    Patch-PnP sees concat[xyz, roi_coord2d, softmax(region[1:])] (3 + 2 + num_regions channels); the
+    mask is not an input, as in GDR-Net. Pose decoding lives in `posenet.geometry`.
+    """
+
+    def __init__(self, config: ModelConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.backbone = Backbone(config.backbone, config.pretrained)
+        afr = None
+        if config.ggca or config.mecs:
+            afr = AFR(
+                config.head_channels,
+                ggca=config.ggca,
+                mecs=config.mecs,
+                groups=config.afr_groups,
+                reduction=config.afr_reduction,
+                kernels=config.mecs_kernels,
+            )
+        self.geo_head = GeoHead(self.backbone.out_channels, config.head_channels, config.num_regions, afr)
+        self.pnp = PatchPnP(
+            in_channels=3 + 2 + config.num_regions,
+            channels=config.pnp_channels,
+            in_res=config.output_res,
+            fc_dims=config.fc_dims,
+            pgsa_heads=config.pgsa_heads if config.pgsa else None,
+        )
+
+    def forward(self, roi_img: Tensor, roi_coord2d: Tensor) -> dict[str, Tensor]:
+        """roi_img B×3×R×R in [0, 1], roi_coord2d B×2×r×r → dict of head outputs (see module docs)."""
+        features, mask, xyz, region = self.geo_head(self.backbone(roi_img))
+        pnp_in = torch.cat([xyz, roi_coord2d, region[:, 1:].softmax(1)], 1)
+        rot6d, site = self.pnp(pnp_in)
+        return {
+            "mask": mask,
+            "xyz": xyz,
+            "region": region,
+            "rot6d": rot6d,
+            "site": site,
+            "features": features,
+        }
+
+    def config_dict(self) -> dict[str, Any]:
+        """JSON-able identity of the architecture, stored with checkpoints to refuse mismatched ones."""
+        return {"variant": self.config.variant, **self.config.to_dict()}
+
+
+def build_model(name: str, config: ModelConfig | None = None) -> PoseNet:
+    """Build variant `name`; without `config`, the paper's configuration of it.
+
+    A given `config` must describe the same variant (same modules, same backbone family), e.g.
+    `ModelConfig.paper(name, ...)` or `ModelConfig.smoke(name)`.
+    """
+    if name not in VARIANTS:
+        raise PosenetError(f"unknown variant {name!r}; choose one of {', '.join(VARIANTS)}")
+    config = ModelConfig.paper(name) if config is None else config
+    if config.variant != name:
+        raise PosenetError(
+            f"config describes variant {config.variant!r}, not {name!r}; "
+            f"use ModelConfig.paper({name!r}, ...) or ModelConfig.smoke({name!r}, ...)"
+        )
+    return PoseNet(config)

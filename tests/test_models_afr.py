@@ -1,0 +1,86 @@
+"""AFR / PGSA building blocks: shapes, identity at γ = 0, median pooling robustness, feature response."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from posenet.featviz import feature_response
+from posenet.models.afr import AFR, GGCA, MECS, channel_descriptors
+from posenet.models.pnp import PGSA
+
+
+@pytest.fixture(autouse=True)
+def _seed() -> None:
+    torch.manual_seed(0)
+
+
+def test_single_outlier_moves_median_least() -> None:
+    x = torch.randn(1, 4, 16, 16)
+    spiked = x.clone()
+    spiked[0, :, 3, 5] = 100.0  # one reflection-like outlier per channel
+    before, after = channel_descriptors(x), channel_descriptors(spiked)
+    mean_shift, max_shift, median_shift = ((a - b).abs() for a, b in zip(after, before, strict=True))
+    assert (median_shift < mean_shift).all()
+    assert (median_shift < max_shift).all()
+    assert (median_shift < 0.05).all()
+
+
+@pytest.mark.parametrize(
+    "module",
+    [
+        GGCA(64, groups=8, reduction=4),
+        MECS(64, reduction=4, kernels=(7, 11, 21)),
+        AFR(64, ggca=True, mecs=True, groups=8, reduction=4, kernels=(7, 11, 21)),
+        AFR(64, ggca=True, mecs=False, groups=8, reduction=4, kernels=(7, 11, 21)),
+        AFR(64, ggca=False, mecs=True, groups=8, reduction=4, kernels=(7, 11, 21)),
+    ],
+)
+def test_afr_parts_keep_shape(module: torch.nn.Module) -> None:
+    x = torch.randn(2, 64, 24, 20)  # non-square on purpose: the H and W axes must not be mixed up
+    assert module(x).shape == x.shape
+
+
+def test_ggca_gates_rows_and_columns() -> None:
+    ggca = GGCA(16, groups=2, reduction=4).eval()
+    x = torch.zeros(1, 16, 8, 6)
+    x[0, :8, 2, :] = 1.0  # one bright row in group 0
+    y = ggca(x)
+    assert y[0, :, :2].abs().max() == 0 and y[0, 8:].abs().max() == 0  # zero stays zero (multiplicative)
+    assert (y[0, :8, 2] > 0).all() and (y[0, :8, 2] < 1).all()  # sigmoid gates in (0, 1)
+
+
+def test_gamma_zero_is_identity_and_gamma_moves_output() -> None:
+    afr = AFR(64, ggca=True, mecs=True, groups=8, reduction=4, kernels=(7, 11, 21))
+    pgsa = PGSA(32, num_tokens=16, heads=4)
+    x, z = torch.randn(2, 64, 16, 16), torch.randn(2, 32, 4, 4)
+    assert torch.equal(afr(x), x) and torch.equal(pgsa(z), z)
+    with torch.no_grad():
+        afr.gamma.fill_(1.0)
+        pgsa.gamma.fill_(1.0)
+    assert not torch.allclose(afr(x), x) and not torch.allclose(pgsa(z), z)
+
+
+def test_pgsa_mixes_tokens() -> None:
+    pgsa = PGSA(32, num_tokens=16, heads=4)
+    with torch.no_grad():
+        pgsa.gamma.fill_(1.0)
+    z = torch.randn(1, 32, 4, 4)
+    poked = z.clone()
+    poked[0, :, 0, 0] += 1.0
+    changed = (pgsa(poked) - pgsa(z)).abs().amax(1)[0]
+    assert changed[3, 3] > 0  # a far token sees the change: global attention, not local conv
+
+
+def test_feature_response_is_per_image_min_max_of_l2_norm() -> None:
+    f = torch.zeros(2, 3, 4, 4)
+    f[0, 0, 1, 1] = 3.0
+    f[0, 1, 1, 1] = 4.0  # norm 5 at (1, 1)
+    f[0, 2, 2, 2] = 1.0
+    f[1] = 7.0  # constant image: no contrast
+    r = feature_response(f)
+    assert r.shape == (2, 4, 4)
+    assert r[0, 1, 1] == 1.0 and r[0, 0, 0] == 0.0 and r[0, 2, 2] == pytest.approx(0.2)
+    assert torch.equal(r[1], torch.zeros(4, 4))
+    up = feature_response(f, size=16)
+    assert up.shape == (2, 16, 16) and up.min() >= 0 and up.max() <= 1

@@ -1,0 +1,27 @@
+"""`posenet bench` end to end on the smoke presets (real models, 1 timed forward each)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from posenet.bench import bench
+
+
+def test_bench_prints_table_and_writes_json(tmp_path: Path) -> None:
+    out = tmp_path / "bench.json"
+    args = ["--smoke", "--device", "cpu", "--threads", "1", "--warmup", "0", "--iters", "1"]
+    args += ["--variant", "gdrnet", "--variant", "gap-gdrnet", "--json", str(out)]
+    result = CliRunner().invoke(bench, args)
+    assert result.exit_code == 0, result.output
+    assert "latency ratio gap-gdrnet / gdrnet" in result.output
+    assert "FLOPs/2" in result.output
+    payload = json.loads(out.read_text())
+    assert payload["device"].startswith("cpu")
+    assert [v["name"] for v in payload["variants"]] == ["gdrnet", "gap-gdrnet"]
+    for row in payload["variants"]:
+        assert set(row) == {"name", "params_m", "macs_g", "latency_ms", "fps"}
+        assert row["params_m"] > 0 and row["macs_g"] > 0 and row["latency_ms"] > 0
+        assert row["fps"] == 1000 / row["latency_ms"]

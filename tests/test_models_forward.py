@@ -1,0 +1,123 @@
+"""Every variant, paper and smoke configurations: output shapes, backward, local backbone weights, config."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import timm
+import torch
+
+from posenet.errors import PosenetError
+from posenet.models import VARIANTS, ModelConfig, build_model
+
+
+def inputs(config: ModelConfig, batch: int) -> tuple[torch.Tensor, torch.Tensor]:
+    r, o = config.input_res, config.output_res
+    return torch.rand(batch, 3, r, r), torch.rand(batch, 2, o, o)
+
+
+def expected_shapes(config: ModelConfig, batch: int) -> dict[str, tuple[int, ...]]:
+    o = config.output_res
+    return {
+        "mask": (batch, 1, o, o),
+        "xyz": (batch, 3, o, o),
+        "region": (batch, config.num_regions + 1, o, o),
+        "rot6d": (batch, 6),
+        "site": (batch, 3),
+        "features": (batch, config.head_channels, o, o),
+    }
+
+
+@pytest.fixture(autouse=True)
+def _one_thread() -> None:
+    torch.set_num_threads(1)
+    torch.manual_seed(0)
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_paper_config_shapes(name: str) -> None:
+    model = build_model(name).eval()
+    config = model.config
+    assert (config.input_res, config.output_res, config.head_channels) == (256, 64, 256)
+    with torch.no_grad():
+        out = model(*inputs(config, batch=1))
+    assert {k: tuple(v.shape) for k, v in out.items()} == expected_shapes(config, 1)
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_smoke_config_shapes_and_backward(name: str) -> None:
+    config = ModelConfig.smoke(name)
+    model = build_model(name, config)
+    out = model(*inputs(config, batch=2))
+    assert {k: tuple(v.shape) for k, v in out.items()} == expected_shapes(config, 2)
+    sum(v.square().mean() for v in out.values()).backward()
+    grads = {n: p.grad for n, p in model.named_parameters()}
+    assert all(g is not None and torch.isfinite(g).all() for g in grads.values())
+    gammas = [g for n, g in grads.items() if n in ("geo_head.refine.gamma", "pnp.pgsa.gamma")]
+    assert len(gammas) == int(config.ggca or config.mecs) + int(config.pgsa)
+    assert all(g.abs().sum() > 0 for g in gammas)  # γ = 0 still learns
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_smoke_preset_keeps_the_variant_modules(name: str) -> None:
+    kinds = {type(m).__name__ for m in build_model(name, ModelConfig.smoke(name)).modules()}
+    variant = VARIANTS[name]
+    assert ("GGCA" in kinds) == variant.ggca
+    assert ("MECS" in kinds) == variant.mecs
+    assert ("AFR" in kinds) == (variant.ggca or variant.mecs)
+    assert ("PGSA" in kinds) == variant.pgsa
+
+
+@pytest.fixture(scope="module")
+def backbone_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """ImageNet-style classifier state dicts of the smoke backbones, as a user would have on disk."""
+    root = tmp_path_factory.mktemp("weights")
+    files = {}
+    for name in {ModelConfig.smoke(v).backbone for v in VARIANTS}:
+        torch.manual_seed(1)
+        files[name] = root / f"{name}.pth"
+        torch.save(timm.create_model(name, pretrained=False).state_dict(), files[name])
+    return files
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_local_backbone_weights_load(name: str, backbone_files: dict[str, Path]) -> None:
+    config = ModelConfig.smoke(name)
+    path = backbone_files[config.backbone]
+    reference = timm.create_model(config.backbone, pretrained=False)
+    reference.load_state_dict(torch.load(path))
+    model = build_model(name, ModelConfig.smoke(name, pretrained=str(path))).eval()
+    x = torch.rand(1, 3, config.input_res, config.input_res)
+    with torch.no_grad():
+        assert torch.equal(model.backbone(x), reference.eval().forward_features(x))
+    saved = torch.load(path)
+    conv = next(k for k in saved if k.endswith("weight") and saved[k].ndim == 4)  # stem conv
+    assert any(torch.equal(saved[conv], v) for v in model.backbone.state_dict().values())
+
+
+def test_wrong_weights_file_is_refused(backbone_files: dict[str, Path], tmp_path: Path) -> None:
+    with pytest.raises(PosenetError, match="not a convnext_atto state dict"):
+        build_model("convnext", ModelConfig.smoke("convnext", pretrained=str(backbone_files["resnet18"])))
+    with pytest.raises(PosenetError, match="not found"):
+        build_model("gdrnet", ModelConfig.smoke("gdrnet", pretrained=str(tmp_path / "missing.pth")))
+
+
+def test_config_dict_identifies_checkpoints() -> None:
+    d = json.loads(json.dumps(build_model("pgsa", ModelConfig.smoke("pgsa")).config_dict()))
+    assert d["variant"] == "pgsa" and "pretrained" not in d  # init-only: not part of the identity
+    assert ModelConfig.from_dict(d) == ModelConfig.smoke("pgsa")
+    assert (
+        ModelConfig.smoke("pgsa", pretrained="imagenet.pth").to_dict() == ModelConfig.smoke("pgsa").to_dict()
+    )
+    assert d != build_model("afr", ModelConfig.smoke("afr")).config_dict()
+
+
+def test_build_model_refuses_a_config_of_another_variant() -> None:
+    with pytest.raises(PosenetError, match="describes variant 'gap-gdrnet'"):
+        build_model("gdrnet", ModelConfig.smoke("gap-gdrnet"))
+    with pytest.raises(PosenetError, match="unknown variant"):
+        build_model("resnet")
+    with pytest.raises(PosenetError, match="input_res / 4"):
+        ModelConfig(input_res=256, output_res=32)
