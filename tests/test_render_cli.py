@@ -20,6 +20,7 @@ from scgen.exr import encode_xyz_exr, read_xyz_exr
 from scgen.model import load_target
 from scgen.render.base import create_backend
 from scgen.scenes import load_config, sample_scene
+from scgen.writer import WriteOptions
 from tests.conftest import SMALL, render_dataset
 
 
@@ -141,3 +142,17 @@ def test_user_mesh_is_normalised(tmp_path: Path):
     trimesh.creation.box(extents=[3.0, 1.0, 2.0]).export(str(mesh_path))
     assert load_target(mesh_path).diameter == pytest.approx(0.2)
     assert load_target(mesh_path, keep_scale=True).diameter == pytest.approx(np.sqrt(14))
+
+
+def test_saved_depth_round_trips_without_wrapping(tmp_path: Path):
+    out = render_dataset(tmp_path / "depth", n=3, write=WriteOptions(save_depth=True))
+    layout, model = Layout(out), load_target()
+    backend = create_backend("mitsuba", model, quality="draft")
+    for i in range(3):
+        split = _split(layout, i)
+        scale = read_json(layout.record(split, i))["scene_camera"]["depth_scale"]
+        stored = cv2.imread(str(layout.depth(split, i)), cv2.IMREAD_UNCHANGED)
+        assert stored.dtype == np.uint16
+        depth = backend.render(sample_scene(0, i, load_config(resolution=SMALL), model.diameter)).depth
+        assert np.abs(stored * scale / 1000.0 - depth).max() <= 0.5 * scale / 1000.0 + 1e-6
+        assert depth.max() * 1000.0 / scale <= 65535
