@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from scgen.errors import ScgenError
+from scgen.preview import preview
 
 
 def one_line_errors(fn):
@@ -75,6 +76,8 @@ def main() -> None:
     default=None,
     help="TOML/YAML file overriding any sampling distribution (see docs/config.md).",
 )
+@click.option("--backgrounds", "backgrounds_dir", type=click.Path(path_type=Path), default=None,
+              help="Folder of your own background images: adds the background kind 'user'.")
 @click.option("--resolution", default=None, help="Image size WxH (default 640x480); keeps the field of view.")
 @click.option("--quality", default="default", show_default=True, help="draft | default | high.")
 @click.option("--device", default="auto", show_default=True, help="Blender device: auto | cpu | gpu.")
@@ -111,6 +114,7 @@ def render(
     model_path,
     keep_scale,
     config_path,
+    backgrounds_dir,
     resolution,
     quality,
     device,
@@ -131,9 +135,11 @@ def render(
     from scgen.writer import WriteOptions
 
     res = parse_resolution(resolution)
+    overrides = {"background": {"user_dir": str(backgrounds_dir)}} if backgrounds_dir else {}
     job = RenderJob(
         out=out, n=n, seed=seed, backend=backend, quality=quality, device=device, model_path=model_path,
-        keep_scale=keep_scale, config_path=config_path, resolution=res, split_by=split_by,
+        keep_scale=keep_scale, config_path=config_path, resolution=res,
+        overrides=overrides, split_by=split_by,
         ratios=parse_ratios(split_text), shard=parse_shard(shard_text),
         workers=workers or os.cpu_count() or 1, executor=executor, ray_address=ray_address,
         write=WriteOptions(rgb_format=rgb_format, xyz_dtype=xyz_dtype, save_depth=save_depth),
@@ -240,3 +246,6 @@ def merge(out: Path, shards: tuple[Path, ...]) -> None:
 
 if __name__ == "__main__":
     main()
+
+
+main.add_command(preview)

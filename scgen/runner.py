@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import multiprocessing as mp
 import os
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +23,7 @@ from scgen.executors import run_local, run_ray
 from scgen.model import TargetModel, load_target, write_model_dir
 from scgen.render.base import BACKENDS, create_backend
 from scgen.scenes import load_config, sample_scene
+from scgen.scenes.silhouette import TargetShape
 from scgen.scenes.spec import SceneSpec
 from scgen.splits import SPLITS, plan_splits, split_lists
 from scgen.worker import Done, Task, WorkerSettings
@@ -98,9 +101,25 @@ def _existing_parent(p: Path) -> Path:
 def make_plan(job: RenderJob) -> Plan:
     cfg = load_config(job.config_path, job.overrides, job.resolution)
     model = load_target(job.model_path, keep_scale=job.keep_scale)
-    specs = [sample_scene(job.seed, i, cfg, model.diameter) for i in range(job.n)]
+    specs = sample_all(job.seed, job.n, cfg, model, job.workers)
     keys = [spec_key(s) for s in specs]
     return Plan(cfg, model, specs, plan_splits(keys, job.ratios, job.seed, job.split_by), keys)
+
+
+def _sample_range(args: tuple[int, range, dict[str, Any], TargetModel]) -> list[SceneSpec]:
+    seed, indices, cfg, model = args
+    shape = TargetShape.from_mesh(model.mesh)
+    return [sample_scene(seed, i, cfg, model.diameter, shape) for i in indices]
+
+
+def sample_all(seed: int, n: int, cfg: dict[str, Any], model: TargetModel, workers: int) -> list[SceneSpec]:
+    """Every SceneSpec of the job (needed up front for the split plan), in parallel when n is large."""
+    if workers <= 1 or n < 500:
+        return _sample_range((seed, range(n), cfg, model))
+    step = -(-n // (4 * workers))
+    chunks = [(seed, range(a, min(n, a + step)), cfg, model) for a in range(0, n, step)]
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+        return [spec for part in pool.map(_sample_range, chunks) for spec in part]
 
 
 def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:

@@ -19,7 +19,8 @@ from scgen.dataset import Layout, read_json
 from scgen.exr import encode_xyz_exr, read_xyz_exr
 from scgen.model import load_target
 from scgen.render.base import create_backend
-from scgen.scenes import load_config, sample_scene
+from scgen.scenes import SceneSpec, load_config, sample_scene
+from scgen.scenes.silhouette import TargetShape
 from scgen.writer import WriteOptions
 from tests.conftest import SMALL, render_dataset
 
@@ -50,7 +51,7 @@ def test_dataset_has_bop_layout_and_one_metadata_row_per_image(small_dataset: Pa
 def test_sample_rendered_alone_equals_sample_from_the_run(small_dataset: Path):
     model = load_target()
     cfg = load_config(resolution=SMALL)
-    spec = sample_scene(0, 7, cfg, model.diameter)
+    spec = sample_scene(0, 7, cfg, model.diameter, TargetShape.from_mesh(model.mesh))
     ann = annotate(spec, create_backend("mitsuba", model, quality="draft").render(spec))
     layout = Layout(small_dataset)
     split = _split(layout, 7)
@@ -153,6 +154,7 @@ def test_saved_depth_round_trips_without_wrapping(tmp_path: Path):
         scale = read_json(layout.record(split, i))["scene_camera"]["depth_scale"]
         stored = cv2.imread(str(layout.depth(split, i)), cv2.IMREAD_UNCHANGED)
         assert stored.dtype == np.uint16
-        depth = backend.render(sample_scene(0, i, load_config(resolution=SMALL), model.diameter)).depth
+        spec = SceneSpec.from_dict(read_json(layout.record(split, i))["spec"])
+        depth = backend.render(spec).depth
         assert np.abs(stored * scale / 1000.0 - depth).max() <= 0.5 * scale / 1000.0 + 1e-6
         assert depth.max() * 1000.0 / scale <= 65535

@@ -1,134 +1,239 @@
 """Procedural background images in linear radiance, deterministic from the background seed.
 
 Both backends render the foreground over a transparent film and composite it over these, so
-the backgrounds are the same image whatever the renderer. Kinds: clean (black space, sparse
-stars), complex (dense stars, nebula glow, sun glare), earth (lit disc or limb with oceans,
-continents, clouds and an atmosphere rim), cluttered (a star field behind 3D clutter props).
+the backgrounds are the same image whatever the renderer. Kinds:
+- clean: black space with a sparse, faint star field;
+- complex: a dense star field, a Milky-Way band with dust lanes, coloured nebula glow, and sun
+  glare coming in from the image side the sun is on;
+- earth: a lit Earth limb or disc (oceans with sun glint, continents, ice, clouds, atmosphere rim);
+- cluttered: a moderate star field (the clutter itself is 3D props, rendered by the backend);
+- user: an image of the user's own (the sampler picks the file), cover-cropped, sRGB decoded.
+Sunlit things (Earth, glare) follow the camera model of scgen.render.lighting: they scale with the
+sun irradiance and the exposure. Stars and nebulae only scale with exposure; their brightness is
+exaggerated for visibility (real stars are about 1e-8 of a sunlit plate).
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import cv2
 import numpy as np
 
+from scgen.errors import ScgenError
+from scgen.render.lighting import exposure_scale
+from scgen.scenes.geometry import random_rotation
 from scgen.scenes.spec import SceneSpec
 
+STARS_PER_MEGAPIXEL = {"clean": 150, "earth": 150, "cluttered": 600, "complex": 6000}
+EARTH_OCEAN = np.array([0.010, 0.030, 0.085])
+EARTH_LAND = (np.array([0.06, 0.09, 0.035]), np.array([0.23, 0.17, 0.10]))  # vegetation, desert
+EARTH_ICE, EARTH_CLOUD = np.array([0.75, 0.78, 0.82]), np.array([0.72, 0.73, 0.75])
+SKY_BLUE = np.array([0.22, 0.45, 1.0])  # atmosphere scattering colour
+EARTH_MAP = (512, 1024)  # equirectangular texture size of the procedural Earth
 
-def background_image(spec: SceneSpec, user_dir: Path | None = None) -> np.ndarray:
+
+def background_image(spec: SceneSpec) -> np.ndarray:
     """H x W x 3 float32 linear background for this sample."""
     cam = spec.camera
     rng = np.random.default_rng(spec.background.seed)
     kind = spec.background.kind
     if kind == "user":
-        return _user_image(spec, user_dir, rng)
-    img = _star_field(rng, cam.height, cam.width, n_stars=250 if kind in ("clean", "cluttered") else 2500)
+        return _user_image(spec, rng)
+    gain = 2.0 ** (-cam.exposure_ev)
+    density = STARS_PER_MEGAPIXEL[kind] * cam.width * cam.height / 1e6
+    img = _star_field(rng, cam.height, cam.width, int(density)) * gain
     if kind == "complex":
-        img += _nebula(rng, cam.height, cam.width)
-        img += _glare(rng, cam.height, cam.width)
+        rays = pixel_rays(spec)
+        img += gain * _milky_way(rng, rays)
+        img += gain * _nebula(rng, cam.height, cam.width)
+        img += _glare(rng, spec)
     elif kind == "earth":
-        img = _earth(spec, rng, img)
+        img = _earth(spec, rng, pixel_rays(spec), img)
     return img.astype(np.float32)
 
 
+def pixel_rays(spec: SceneSpec) -> np.ndarray:
+    """Unit camera-frame directions through every pixel centre (H x W x 3)."""
+    cam = spec.camera
+    v, u = np.mgrid[0 : cam.height, 0 : cam.width].astype(np.float64)
+    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(cam.K_mat).T
+    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+
+
 def _star_field(rng: np.random.Generator, h: int, w: int, n_stars: int) -> np.ndarray:
+    """Point stars with a power-law flux distribution and black-body-like tints, blurred by the optics."""
     img = np.zeros((h, w, 3), np.float32)
-    ys = rng.integers(0, h, n_stars)
-    xs = rng.integers(0, w, n_stars)
-    flux = 0.02 * rng.pareto(1.6, n_stars).clip(0, 40) + 0.01
+    ys = rng.uniform(0, h - 1, n_stars)
+    xs = rng.uniform(0, w - 1, n_stars)
+    flux = 0.015 * (rng.pareto(1.4, n_stars) + 0.3).clip(0, 60)
     temperature = rng.uniform(0, 1, n_stars)[:, None]
-    colour = (1 - temperature) * np.array([1.0, 0.85, 0.7]) + temperature * np.array([0.75, 0.85, 1.0])
-    np.add.at(img, (ys, xs), (flux[:, None] * colour).astype(np.float32))
-    return cv2.GaussianBlur(img, (0, 0), 0.6) * 2.0
+    colour = (1 - temperature) * np.array([1.0, 0.8, 0.62]) + temperature * np.array([0.72, 0.84, 1.0])
+    value = (flux[:, None] * colour).astype(np.float32)
+    # bilinear splat: sub-pixel positions, so faint stars are not all single hot pixels
+    x0, y0 = np.floor(xs).astype(int), np.floor(ys).astype(int)
+    fx, fy = (xs - x0)[:, None], (ys - y0)[:, None]
+    for dy, wy in ((0, 1 - fy), (1, fy)):
+        for dx, wx in ((0, 1 - fx), (1, fx)):
+            np.add.at(img, (np.minimum(y0 + dy, h - 1), np.minimum(x0 + dx, w - 1)), value * wx * wy)
+    return cv2.GaussianBlur(img, (0, 0), 0.7) * 3.0
 
 
-def _smooth_noise(rng: np.random.Generator, h: int, w: int, octaves: int = 5, base: int = 3) -> np.ndarray:
-    """Fractal value noise in [0, 1] (sum of upsampled random grids)."""
+def smooth_noise(rng: np.random.Generator, h: int, w: int, octaves: int = 5, base: int = 3) -> np.ndarray:
+    """Fractal value noise in [0, 1] (sum of bicubically upsampled random grids)."""
     acc = np.zeros((h, w), np.float32)
-    amp, total = 1.0, 0.0
+    amp = 1.0
     for o in range(octaves):
         n = base * 2**o
-        grid = rng.uniform(0, 1, (n, n)).astype(np.float32)
+        grid = rng.uniform(0, 1, (n + 1, n + 1)).astype(np.float32)
         acc += amp * cv2.resize(grid, (w, h), interpolation=cv2.INTER_CUBIC)
-        total += amp
         amp *= 0.5
-    acc /= total
     return (acc - acc.min()) / max(1e-6, float(acc.max() - acc.min()))
 
 
+def periodic_noise(rng: np.random.Generator, h: int, w: int, beta: float, aspect: float = 1.0) -> np.ndarray:
+    """Fractal noise with power spectrum 1/f^beta, periodic in both axes (FFT-filtered white noise).
+
+    Normalised to zero mean, unit standard deviation. `aspect` > 1 stretches features along x
+    (cloud bands). Periodic in x, so an equirectangular map of it has no seam at the date line.
+    """
+    fy = np.fft.fftfreq(h)[:, None]
+    fx = np.fft.rfftfreq(w)[None, :] * (h / w) * aspect
+    f = np.hypot(fx, fy)
+    f[0, 0] = 1.0
+    spectrum = np.fft.rfft2(rng.normal(size=(h, w))) / f ** (0.5 * beta)
+    spectrum[0, 0] = 0.0
+    out = np.fft.irfft2(spectrum, s=(h, w))
+    return (out / out.std()).astype(np.float32)
+
+
+def _equirect(texture: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Bilinear look-up of an equirectangular map (rows: latitude +90..-90) at unit vectors q (N x 3)."""
+    h, w = texture.shape
+    lat = np.arcsin(np.clip(q[:, 2], -1, 1))
+    lon = np.arctan2(q[:, 1], q[:, 0])
+    x = (lon / (2 * np.pi) + 0.5) * w - 0.5
+    y = np.clip((0.5 - lat / np.pi) * (h - 1), 0, h - 1)
+    x0, y0 = np.floor(x).astype(np.int64), np.minimum(np.floor(y).astype(np.int64), h - 2)
+    fx, fy = x - x0, y - y0
+    x0, x1 = x0 % w, (x0 + 1) % w  # wraps at the date line
+    top = (1 - fx) * texture[y0, x0] + fx * texture[y0, x1]
+    bottom = (1 - fx) * texture[y0 + 1, x0] + fx * texture[y0 + 1, x1]
+    return (1 - fy) * top + fy * bottom
+
+
+def _milky_way(rng: np.random.Generator, rays: np.ndarray) -> np.ndarray:
+    """A galactic band along a random great circle: diffuse glow, mottled, with dark dust lanes."""
+    h, w = rays.shape[:2]
+    pole = rng.normal(size=3)
+    pole /= np.linalg.norm(pole)
+    lat = np.arcsin(np.clip(rays @ pole, -1, 1))
+    mottle = smooth_noise(rng, h, w, octaves=6, base=3)
+    dust = smooth_noise(rng, h, w, octaves=6, base=4)
+    width = rng.uniform(0.12, 0.25)
+    band = np.exp(-((lat / width) ** 2)) * (0.3 + mottle)
+    lanes = 1.0 - 0.9 * np.exp(-((lat / (0.4 * width)) ** 2)) * np.clip((dust - 0.4) * 4, 0, 1)
+    return (0.07 * band * lanes)[..., None] * np.array([1.0, 0.92, 0.8])
+
+
 def _nebula(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
-    density = _smooth_noise(rng, h, w) ** 3
-    hue = rng.uniform(0, 1, 3).astype(np.float32)
-    tint = 0.4 + 0.6 * hue / hue.max()
-    band = _smooth_noise(rng, h, w, octaves=3, base=2)
-    return (0.12 * density[..., None] * tint + 0.03 * band[..., None] * np.array([0.8, 0.8, 1.0])).astype(
-        np.float32
-    )
+    """Coloured emission/reflection glow: sparse fractal clouds in two hues."""
+    out = np.zeros((h, w, 3), np.float32)
+    for hue in (np.array([1.0, 0.35, 0.45]), np.array([0.35, 0.55, 1.0])):
+        density = np.clip(smooth_noise(rng, h, w, octaves=6, base=2) - 0.45, 0, None) ** 1.5
+        out += (rng.uniform(0.0, 0.25) * density[..., None] * hue).astype(np.float32)
+    return out
 
 
-def _glare(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
-    """A sun-glare bloom with a faint diffraction streak, anchored near an image edge."""
+def _glare(rng: np.random.Generator, spec: SceneSpec) -> np.ndarray:
+    """Veiling glare and a diffraction streak from the sun, entering from the side the sun is on.
+
+    Its strength falls with the sun's angle from the optical axis and follows sun irradiance and
+    exposure, so strong light flares more.
+    """
+    cam = spec.camera
+    h, w = cam.height, cam.width
+    s = np.asarray(spec.sun.direction)
+    side = s[:2] / max(np.linalg.norm(s[:2]), 1e-9)
+    off_axis = np.arccos(np.clip(s[2], -1, 1))
+    cx = 0.5 * (w - 1) * (1 + 1.25 * side[0])
+    cy = 0.5 * (h - 1) * (1 + 1.25 * side[1] * w / h)
     y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-    edge = rng.integers(4)
-    cx = [rng.uniform(0, w), rng.uniform(0, w), -0.1 * w, 1.1 * w][edge]
-    cy = [-0.1 * h, 1.1 * h, rng.uniform(0, h), rng.uniform(0, h)][edge]
     r = np.hypot(x - cx, y - cy) / max(h, w)
     bloom = 0.6 * np.exp(-r / 0.12) + 0.15 * np.exp(-r / 0.4)
     angle = rng.uniform(0, np.pi)
     dist_line = np.abs((x - cx) * np.sin(angle) - (y - cy) * np.cos(angle)) / max(h, w)
     streak = 0.2 * np.exp(-dist_line / 0.004) * np.exp(-r / 0.5)
-    return ((bloom + streak)[..., None] * np.array([1.0, 0.95, 0.85])).astype(np.float32)
+    strength = spec.sun.irradiance * exposure_scale(spec) * np.exp(-max(off_axis - 0.6, 0.0) / 0.8)
+    return (strength * (bloom + streak)[..., None] * np.array([1.0, 0.95, 0.85])).astype(np.float32)
 
 
-def _earth(spec: SceneSpec, rng: np.random.Generator, stars: np.ndarray) -> np.ndarray:
-    """A lit Earth disc/limb: the unit sphere at direction c seen with angular radius rho."""
-    cam = spec.camera
+def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np.ndarray) -> np.ndarray:
+    """A lit Earth: the unit sphere at direction c seen with angular radius rho, over the star field.
+
+    Lambertian surface (oceans with a sun glint, two land types, polar ice, clouds) under the sun,
+    a scattering haze thickening towards the limb, and a thin glow above it; night side black.
+    """
     params = spec.background.params
     c = np.asarray(params["centre_dir"], np.float64)
     rho = np.deg2rad(params["angular_radius_deg"])
     centre = c / np.sin(rho)  # Earth of radius 1 at this distance subtends rho
-    v, u = np.mgrid[0 : cam.height, 0 : cam.width].astype(np.float64)
-    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(cam.K_mat).T
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
     b = rays @ centre
     disc = b * b - (centre @ centre - 1.0)
     hit = disc > 0
-    t_hit = b - np.sqrt(np.where(hit, disc, 0.0))
-    normal = rays * t_hit[..., None] - centre
     sun = np.asarray(spec.sun.direction)
-    lambert = np.clip(normal @ sun, 0, 1)
-    # surface texture from 3D value noise sampled on the sphere (lat/long grids)
-    lat = np.arcsin(np.clip(normal[..., 1], -1, 1))
-    lon = np.arctan2(normal[..., 0], normal[..., 2])
-    tex_h, tex_w = 256, 512
-    land = _smooth_noise(rng, tex_h, tex_w, octaves=6, base=4) > 0.55
-    cloud = np.clip((_smooth_noise(rng, tex_h, tex_w, octaves=6, base=6) - 0.5) * 3, 0, 1)
-    ti = ((lat / np.pi + 0.5) * (tex_h - 1)).astype(int).clip(0, tex_h - 1)
-    tj = ((lon / (2 * np.pi) + 0.5) * (tex_w - 1)).astype(int).clip(0, tex_w - 1)
-    ocean_c = np.array([0.02, 0.06, 0.18])
-    land_c = np.array([0.12, 0.14, 0.06])
-    surface = np.where(land[ti, tj][..., None], land_c, ocean_c)
-    cl = cloud[ti, tj][..., None]
-    surface = (1 - cl) * surface + cl * np.array([0.8, 0.8, 0.82])
-    irr = spec.sun.irradiance / 1361.0 * 2.0 ** (-spec.camera.exposure_ev)
-    earth = surface * lambert[..., None] * irr
-    # atmosphere rim: blue glow growing towards the limb on the day side
-    limb = np.clip(1 - np.sqrt(np.clip(disc, 0, None)) / 0.35, 0, 1)
-    rim = 0.25 * limb[..., None] * np.array([0.3, 0.55, 1.0]) * (0.2 + lambert[..., None]) * irr
-    img = np.where(hit[..., None], earth + rim, stars)
-    halo_d = np.clip(-disc, 0, None)
-    halo = 0.08 * np.exp(-halo_d / 0.02)[..., None] * np.array([0.3, 0.55, 1.0]) * irr
-    return (img + np.where(hit[..., None], 0, halo)).astype(np.float32)
+    irr = spec.sun.irradiance * exposure_scale(spec)  # image value of a white plate facing the sun
+
+    n = rays[hit] * (b[hit] - np.sqrt(disc[hit]))[:, None] - centre  # unit surface normals
+    q = n @ random_rotation(rng).T  # Earth-fixed coordinates: continents do not follow the camera
+    mu_s = n @ sun
+    mu_v = -np.sum(n * rays[hit], axis=1)  # cosine of the viewing angle (1 at disc centre, 0 at limb)
+    tex_h, tex_w = EARTH_MAP
+    height = _equirect(periodic_noise(rng, tex_h, tex_w, beta=3.2), q)
+    dry = _equirect(periodic_noise(rng, tex_h, tex_w, beta=3.0), q)
+    cloud_map = periodic_noise(rng, tex_h, tex_w, beta=2.4, aspect=0.7)
+    land = np.clip((height - 0.45) * 6, 0, 1)[:, None]  # about a third of the surface is land
+    dry = np.clip(0.5 + 0.6 * dry, 0, 1)[:, None]
+    ice = np.clip((np.abs(q[:, 2]) - 0.95) * 40, 0, 1)[:, None]
+    cloud = np.clip((_equirect(cloud_map, q) - 0.5) * 0.9, 0, 1)[:, None]  # about 30 % cover
+    depth = np.clip(0.6 - 0.25 * height, 0.3, 1.0)[:, None]  # shallow seas are lighter
+    ground = (1 - dry) * EARTH_LAND[0] + dry * EARTH_LAND[1]
+    surface = (1 - land) * EARTH_OCEAN / depth + land * ground
+    surface = (1 - ice) * surface + ice * EARTH_ICE
+    surface = (1 - cloud) * surface + cloud * EARTH_CLOUD
+    lit = np.clip(mu_s, 0, 1)[:, None]
+    half = sun - rays[hit]
+    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    glint = 0.15 * (1 - land) * (1 - cloud) * np.clip(np.sum(n * half, 1), 0, 1)[:, None] ** 2000
+    haze_depth = 1.0 / np.maximum(mu_v, 0.08)  # optical path through the atmosphere grows to the limb
+    haze = 0.035 * haze_depth[:, None] * SKY_BLUE * np.clip(mu_s + 0.15, 0, 1)[:, None]
+    radiance = (surface * lit + glint * (mu_s > 0)[:, None]) * np.exp(-0.05 * haze_depth)[:, None] + haze
+
+    img = stars.copy()
+    img[hit] = irr * radiance
+    # glow above the limb: thin shell of scattered light on the day side
+    gap = np.sqrt(np.clip(-disc, 0, None))  # grows with angular distance outside the limb
+    outside = ~hit
+    limb_normal = rays[outside] * b[outside][:, None] - centre
+    limb_normal /= np.maximum(np.linalg.norm(limb_normal, axis=1, keepdims=True), 1e-9)
+    day = np.clip(limb_normal @ sun + 0.2, 0, 1)
+    glow = 0.12 * np.exp(-gap[outside] / 0.025) * day
+    img[outside] += irr * glow[:, None] * SKY_BLUE
+    return img.astype(np.float32)
 
 
-def _user_image(spec: SceneSpec, user_dir: Path | None, rng: np.random.Generator) -> np.ndarray:
-    """A random image from the user's folder, cover-resized and cropped, sRGB decoded to linear."""
-    files = sorted(p for p in (user_dir or Path()).iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
-    img = cv2.imread(str(files[int(rng.integers(len(files)))]), cv2.IMREAD_COLOR)[..., ::-1]
+def _user_image(spec: SceneSpec, rng: np.random.Generator) -> np.ndarray:
+    """The sampled user image, cover-resized and cropped at random, sRGB decoded to linear.
+
+    Photographs are display-referred: they are used as they are, not scaled by the exposure.
+    """
+    path = spec.background.params["image"]
+    img = cv2.imread(path, cv2.IMREAD_COLOR)
+    if img is None:
+        raise ScgenError(f"cannot read background image {path}")
+    img = img[..., ::-1]
     h, w = spec.camera.height, spec.camera.width
     scale = max(h / img.shape[0], w / img.shape[1])
-    img = cv2.resize(img, (int(np.ceil(img.shape[1] * scale)), int(np.ceil(img.shape[0] * scale))))
+    size = (max(w, int(np.ceil(img.shape[1] * scale))), max(h, int(np.ceil(img.shape[0] * scale))))
+    img = cv2.resize(img, size, interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
     y0 = int(rng.integers(0, img.shape[0] - h + 1))
     x0 = int(rng.integers(0, img.shape[1] - w + 1))
     return srgb_to_linear(img[y0 : y0 + h, x0 : x0 + w].astype(np.float32) / 255.0)

@@ -2,6 +2,10 @@
 
 Camera model: an image value of 1.0 (before sRGB encoding and clipping) is what a white
 Lambertian plate facing a 1-AU sun (1361 W/m^2) gives at exposure EV 0; each +1 EV halves it.
+So EV 0 is "expose to the right": the brightest diffuse surface just does not clip. The
+illumination levels scale the sun irradiance (config illumination.multipliers), which for the
+image is the same as an exposure shift of log2(multiplier) EV; camera.exposure_ev itself is a
+fixed, logged setting that no level changes.
 A renderer whose Lambertian radiance is albedo * E * cos / pi must be given E * pi * scale.
 """
 
@@ -41,3 +45,12 @@ def earth_albedo_light(spec: SceneSpec) -> tuple[np.ndarray, float] | None:
     if e <= 0:
         return None
     return c, float(np.pi * e * exposure_scale(spec))
+
+
+def mean_luminance(rgb: np.ndarray, mask: np.ndarray) -> float:
+    """Mean linear luminance (Rec. 709 Y of the decoded sRGB pixels) over `mask`; 0 for an empty mask."""
+    if not mask.any():
+        return 0.0
+    x = rgb[mask].astype(np.float64) / 255.0
+    lin = np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+    return float((lin @ np.array([0.2126, 0.7152, 0.0722])).mean())

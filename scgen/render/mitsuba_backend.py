@@ -12,12 +12,12 @@ import sys
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-import trimesh
 
 from scgen.model import TargetModel
 from scgen.render.backgrounds import background_image, linear_to_srgb8
 from scgen.render.base import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
+from scgen.render.mitsuba_materials import box_uv, build_bsdfs, texture_scale
 from scgen.render.props import prop_mesh
 from scgen.scenes.spec import SceneSpec
 
@@ -41,42 +41,18 @@ def select_variant() -> str:
     return mi.variant()
 
 
-def _bsdf(material: str) -> dict:
-    """Spacecraft material classes as Mitsuba BSDFs."""
-    if material == "mli_gold":
-        return {"type": "roughconductor", "material": "Au", "alpha": 0.25}
-    if material == "mli_silver":
-        return {"type": "roughconductor", "material": "Ag", "alpha": 0.2}
-    if material == "brushed_metal":
-        return {"type": "roughconductor", "material": "Al", "alpha": 0.15}
-    if material == "solar_cell":
-        return {
-            "type": "principled",
-            "base_color": {"type": "rgb", "value": [0.02, 0.03, 0.09]},
-            "roughness": 0.15,
-            "specular": 0.6,
-        }
-    if material == "dark_metal":
-        return {
-            "type": "principled",
-            "base_color": {"type": "rgb", "value": [0.05, 0.05, 0.055]},
-            "metallic": 0.5,
-            "roughness": 0.4,
-        }
-    return {
-        "type": "principled",
-        "base_color": {"type": "rgb", "value": [0.75, 0.75, 0.72]},
-        "roughness": 0.6,
-    }
-
-
-def _mesh(name: str, mesh: trimesh.Trimesh, material: str) -> mi.Mesh:
-    m = mi.Mesh(name, len(mesh.vertices), len(mesh.faces), props=mi.Properties(), has_vertex_normals=False)
+def _mesh(name: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, bsdf: mi.BSDF) -> mi.Mesh:
+    """A Mitsuba mesh of unwelded triangles (3 vertices per face, as box_uv lays them out)."""
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    m = mi.Mesh(name, 3 * len(faces), len(faces), props=props, has_vertex_normals=False,
+                has_vertex_texcoords=True)  # fmt: skip
     params = mi.traverse(m)
-    params["vertex_positions"] = dr.ravel(mi.TensorXf(np.asarray(mesh.vertices, np.float32)))
-    params["faces"] = dr.ravel(mi.TensorXu(np.asarray(mesh.faces, np.uint32)))
+    params["vertex_positions"] = dr.ravel(mi.TensorXf(vertices[faces].reshape(-1, 3).astype(np.float32)))
+    params["faces"] = dr.ravel(mi.TensorXu(np.arange(3 * len(faces), dtype=np.uint32)))
+    params["vertex_texcoords"] = dr.ravel(mi.TensorXf(uv.astype(np.float32)))
     params.update()
-    return m, _bsdf(material)
+    return m
 
 
 class MitsubaBackend:
@@ -90,33 +66,50 @@ class MitsubaBackend:
             dr.set_thread_count(threads)
         self.model = model
         self.spp = QUALITY_SPP[quality]
+        self.bsdfs = build_bsdfs()
+        self._target_uv = [
+            box_uv(np.asarray(mesh.vertices), np.asarray(mesh.faces), texture_scale(material, model.diameter))
+            for material, mesh in model.parts
+        ]
 
     def close(self) -> None:
         pass
 
-    def _shape_dicts(self, spec: SceneSpec) -> tuple[list[dict], list[dict]]:
-        """Mitsuba shape dicts for the target parts and for the props (both in the camera frame)."""
+    def _shapes(self, spec: SceneSpec) -> tuple[list[mi.Mesh], list[mi.Mesh]]:
+        """Mitsuba meshes of the target parts and of the props, in the camera frame."""
         T = spec.target.matrix
         target, props = [], []
-        for k, (material, mesh) in enumerate(self.model.parts):
+        for k, ((material, mesh), uv) in enumerate(zip(self.model.parts, self._target_uv, strict=True)):
             m = mesh.copy()
             m.apply_transform(T)
-            shape, bsdf = _mesh(f"target{k}", m, material)
-            target.append({"shape": shape, "bsdf": bsdf})
+            target.append(_mesh(f"target{k}", np.asarray(m.vertices), np.asarray(m.faces), uv,
+                                self.bsdfs[material]))  # fmt: skip
         for k, prop in enumerate(spec.props):
-            shape, bsdf = _mesh(f"prop{k}", prop_mesh(prop), prop.material)
-            props.append({"shape": shape, "bsdf": bsdf})
+            m = prop_mesh(prop)
+            local = (np.asarray(m.vertices) - prop.pose.t_vec) @ prop.pose.R_mat  # UVs stick to the prop
+            uv = box_uv(local, np.asarray(m.faces), texture_scale(prop.material, max(prop.size)))
+            props.append(_mesh(f"prop{k}", np.asarray(m.vertices), np.asarray(m.faces), uv,
+                               self.bsdfs[prop.material]))  # fmt: skip
         return target, props
 
     def render(self, spec: SceneSpec) -> Buffers:
-        target, props = self._shape_dicts(spec)
+        target, props = self._shapes(spec)
+        buffers = self._passes(spec, target, props)
+        buffers.rgb = self._shade(spec, target + props)
+        return buffers
+
+    def render_geometry(self, spec: SceneSpec) -> Buffers:
+        """Only the exact geometric passes (RGB left black): labels at a fraction of the cost."""
+        return self._passes(spec, *self._shapes(spec))
+
+    def _passes(self, spec: SceneSpec, target: list[mi.Mesh], props: list[mi.Mesh]) -> Buffers:
         geo_target = self._geometry_scene(target)
         geo_all = self._geometry_scene(target + props)
         geo_props = self._geometry_scene(props) if props else None
 
         W, H = spec.camera.width, spec.camera.height
         rays_cam = _pixel_rays(spec.camera.K_mat, W, H)
-        t_all, idx_all, normal = _cast(geo_all, [s["shape"] for s in target + props], rays_cam)
+        t_all, idx_all, normal = _cast(geo_all, target + props, rays_cam)
         t_tgt, _, _ = _cast(geo_target, [], rays_cam)
         z_scale = rays_cam[:, 2]
         depth = np.where(np.isfinite(t_all), t_all * z_scale, 0.0).reshape(H, W).astype(np.float32)
@@ -137,9 +130,8 @@ class MitsubaBackend:
             origins = pts[on_target] + 1e-4 * normal[on_target]
             sun_blocked[on_target] = _occluded(geo_props, origins, sun)
 
-        rgb = self._shade(spec, target + props)
         return Buffers(
-            rgb=rgb,
+            rgb=np.zeros((H, W, 3), np.uint8),
             depth=depth,
             instance=instance.reshape(H, W),
             target_depth=target_depth,
@@ -148,13 +140,13 @@ class MitsubaBackend:
         )
 
     @staticmethod
-    def _geometry_scene(shapes: list[dict]) -> mi.Scene:
+    def _geometry_scene(shapes: list[mi.Mesh]) -> mi.Scene:
         d = {"type": "scene"}
         for k, s in enumerate(shapes):
-            d[f"s{k:03d}"] = s["shape"]
+            d[f"s{k:03d}"] = s
         return mi.load_dict(d)
 
-    def _shade(self, spec: SceneSpec, shapes: list[dict]) -> np.ndarray:
+    def _shade(self, spec: SceneSpec, shapes: list[mi.Mesh]) -> np.ndarray:
         cam = spec.camera
         K = cam.K_mat
         d: dict = {
@@ -193,7 +185,7 @@ class MitsubaBackend:
                 "irradiance": {"type": "rgb", "value": [0.8 * irradiance, 0.9 * irradiance, irradiance]},
             }
         for k, s in enumerate(shapes):
-            d[f"s{k:03d}"] = s["shape"]
+            d[f"s{k:03d}"] = s
         scene = mi.load_dict(d)
         seed = (spec.seed * 1_000_003 + spec.index) % (2**31)
         img = np.asarray(mi.render(scene, seed=seed), dtype=np.float32)
@@ -217,10 +209,19 @@ def _cast(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarray, 
     valid = np.asarray(si.is_valid())
     t = np.where(valid, np.asarray(si.t, np.float64), np.inf)
     idx = np.full(len(dirs), -1, np.int64)
-    for k, shape in enumerate(shapes):  # scene.shapes() is not in insertion order: compare pointers
-        idx[np.asarray(si.shape == mi.ShapePtr(shape)) & valid] = k
+    if shapes:  # scene.shapes() is not in insertion order: map each hit's shape registry id to its index
+        ids = np.array([_registry_id(mi.ShapePtr(s))[0] for s in shapes])
+        hit_ids = _registry_id(si.shape)
+        lut = np.full(max(int(ids.max()), int(hit_ids.max())) + 1, -1, np.int64)
+        lut[ids] = np.arange(len(shapes))
+        idx = np.where(valid, lut[hit_ids], -1)
     n = np.stack([np.asarray(si.n.x), np.asarray(si.n.y), np.asarray(si.n.z)], 1).astype(np.float64)
     return t, idx, np.where(valid[:, None], n, 0.0)
+
+
+def _registry_id(ptr: mi.ShapePtr) -> np.ndarray:
+    """Dr.Jit stores shape pointers as registry ids: one vectorised comparison instead of one per shape."""
+    return np.asarray(dr.reinterpret_array(mi.UInt32, ptr)).astype(np.int64)
 
 
 def _occluded(scene: mi.Scene, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:

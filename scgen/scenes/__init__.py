@@ -2,6 +2,7 @@
 
 from scgen.scenes.config import load_config
 from scgen.scenes.sampler import sample_scene
+from scgen.scenes.silhouette import TargetShape
 from scgen.scenes.spec import SceneSpec
 
-__all__ = ["SceneSpec", "load_config", "sample_scene"]
+__all__ = ["SceneSpec", "TargetShape", "load_config", "sample_scene"]

@@ -19,8 +19,11 @@ from scgen.errors import ScgenError
 
 ILLUMINATION_LEVELS = ("weak", "normal", "strong")
 BACKGROUND_KINDS = ("clean", "complex", "earth", "cluttered")
+USER_BACKGROUND = "user"  # the user's own images (background.user_dir); not a group of the paper
 OCCLUSION_GROUPS = ("none", "slight", "moderate", "heavy")
+USER_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
+# Every key is documented in docs/config.md.
 DEFAULT_CONFIG: dict[str, Any] = {
     "camera": {
         "width": 640,
@@ -43,28 +46,43 @@ DEFAULT_CONFIG: dict[str, Any] = {
     },
     "illumination": {
         "solar_irradiance": 1361.0,  # W/m^2 at 1 AU
-        "multipliers": {"weak": 0.3, "normal": 1.0, "strong": 2.5},
+        # sun irradiance per level, x solar_irradiance: -2.3 / 0 / +2.3 EV (docs/config.md)
+        "multipliers": {"weak": 0.2, "normal": 1.0, "strong": 5.0},
         "probs": {"weak": 1 / 3, "normal": 1 / 3, "strong": 1 / 3},
         # largest sun phase angle (sun direction vs. direction to the camera), degrees
-        "max_phase_deg": 110.0,
+        "max_phase_deg": 75.0,
     },
     "shadow": {
-        "caster_prob": 0.5,
-        # caster distance from the target centre and lateral offset, in target diameters
-        "distance_diam": [1.0, 2.0],
-        "offset_diam": [0.0, 0.45],
+        "caster_prob": 0.55,
+        # share of the target's sun-view silhouette the caster is aimed to cover
+        "coverage": [0.15, 0.6],
+        # or, instead of aiming: the caster's offset from the sun line through the target (diameters)
+        "offset_diam": None,
+        # caster distance beyond the two bounding balls, along the sun direction, in target diameters
+        "distance_diam": [0.5, 2.0],
         "size_diam": [0.6, 1.2],
     },
     "background": {
-        "probs": {"clean": 0.25, "complex": 0.25, "earth": 0.25, "cluttered": 0.25},
-        "clutter_count": [2, 5],
-        "clutter_depth_factor": [1.6, 4.0],
+        # 'user' applies only with user_dir (or user_images); without, its share goes to the others
+        "probs": {"clean": 0.2, "complex": 0.2, "earth": 0.2, "cluttered": 0.2, "user": 0.2},
+        "user_dir": None,
+        "user_images": None,  # resolved from user_dir: the sorted image files
+        "earth_albedo": 0.3,
+        "earth_limb_prob": 0.6,  # a low-orbit limb crossing the frame; else a whole distant disc
+        "earth_limb_radius_deg": [55.0, 72.0],
+        "earth_disc_radius_deg": [8.0, 20.0],
+        "clutter_count": [3, 7],
+        "clutter_depth_factor": [1.4, 4.0],
+        # clutter prop half-length in target projected radii (at the prop's depth)
+        "clutter_size_rel": [0.6, 2.5],
     },
     "occluders": {
         "group_probs": {"none": 0.25, "slight": 0.25, "moderate": 0.25, "heavy": 0.25},
-        # occluder depth as a fraction of the target depth
-        "depth_frac": [0.45, 0.8],
-        # projected occluder half-size relative to the target's projected radius
+        # r_occ the occluder is aimed at, per requested group (inside the paper's group limits)
+        "target_r_occ": {"slight": [0.04, 0.16], "moderate": [0.25, 0.35], "heavy": [0.5, 0.8]},
+        # occluder depth as a fraction of the deepest depth that keeps it in front of the target
+        "depth_frac": [0.45, 0.9],
+        # projected occluder half-length relative to the target's projected radius (before growth)
         "size_rel": [0.45, 0.9],
         # distractors shown with no overlap in the 'none' group (probability of one)
         "distractor_prob": 0.3,
@@ -91,7 +109,7 @@ def _merge(base: dict[str, Any], override: dict[str, Any], prefix: str = "") -> 
 
 def _is_label_map(d: dict[str, Any]) -> bool:
     return all(isinstance(v, (int, float)) for v in d.values()) and set(d) <= set(
-        ILLUMINATION_LEVELS + BACKGROUND_KINDS + OCCLUSION_GROUPS
+        ILLUMINATION_LEVELS + BACKGROUND_KINDS + (USER_BACKGROUND,) + OCCLUSION_GROUPS
     )
 
 
@@ -161,25 +179,72 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
     else:
         _check_range("distance.range_m", dist["range_m"], low=1e-6)
 
+    occ = cfg["occluders"]
     for name in ("depth_frac", "size_rel"):
-        _check_range(f"occluders.{name}", cfg["occluders"][name], low=1e-6)
-    if not cfg["occluders"]["depth_frac"][1] < 1.0:
-        raise ScgenError("occluders.depth_frac must stay below 1 (occluders sit in front of the target)")
-    for name in ("distance_diam", "offset_diam", "size_diam"):
-        _check_range(f"shadow.{name}", cfg["shadow"][name], low=0.0)
-    _check_range("background.clutter_count", cfg["background"]["clutter_count"], low=0)
-    _check_range("background.clutter_depth_factor", cfg["background"]["clutter_depth_factor"], low=1.0)
-    _check_prob("shadow.caster_prob", cfg["shadow"]["caster_prob"])
-    _check_prob("occluders.distractor_prob", cfg["occluders"]["distractor_prob"])
+        _check_range(f"occluders.{name}", occ[name], low=1e-6)
+    if not occ["depth_frac"][1] <= 1.0:
+        raise ScgenError("occluders.depth_frac must lie in (0, 1] (occluders sit in front of the target)")
+    if set(occ["target_r_occ"]) != set(OCCLUSION_GROUPS[1:]):
+        raise ScgenError(f"occluders.target_r_occ must give a range for each of {list(OCCLUSION_GROUPS[1:])}")
+    for group, (lo, hi) in zip(OCCLUSION_GROUPS[1:], ((0.0, 0.2), (0.2, 0.4), (0.4, 1.0)), strict=True):
+        r = occ["target_r_occ"][group]
+        _check_range(f"occluders.target_r_occ.{group}", r, low=0.0)
+        if not (lo < r[0] and r[1] <= hi):
+            raise ScgenError(f"occluders.target_r_occ.{group} must lie in ({lo}, {hi}], got {r}")
+    shadow = cfg["shadow"]
+    for name in ("distance_diam", "size_diam", "coverage"):
+        _check_range(f"shadow.{name}", shadow[name], low=0.0)
+    if not (shadow["coverage"][0] > 0.0 and shadow["coverage"][1] <= 1.0):
+        raise ScgenError(f"shadow.coverage must lie in (0, 1], got {shadow['coverage']}")
+    if shadow["offset_diam"] is not None:
+        _check_range("shadow.offset_diam", shadow["offset_diam"], low=0.0)
+    if not shadow["size_diam"][0] > 0:
+        raise ScgenError("shadow.size_diam must be positive")
+    _check_prob("shadow.caster_prob", shadow["caster_prob"])
+    _check_prob("occluders.distractor_prob", occ["distractor_prob"])
+    _resolve_background(cfg["background"])
     if not 0 <= cfg["illumination"]["max_phase_deg"] <= 180:
         raise ScgenError("illumination.max_phase_deg must lie in [0, 180]")
-    for name in ("illumination.probs", "background.probs", "occluders.group_probs"):
+    for name in ("illumination.probs", "occluders.group_probs"):
         section, key = name.split(".")
         _check_distribution(name, cfg[section][key])
     for level, m in cfg["illumination"]["multipliers"].items():
         if m <= 0:
             raise ScgenError(f"illumination.multipliers.{level} must be positive, got {m}")
     return cfg
+
+
+def _resolve_background(bg: dict[str, Any]) -> None:
+    """Check the background section; list the user's images; drop the user share when there are none."""
+    _check_range("background.clutter_count", bg["clutter_count"], low=0)
+    _check_range("background.clutter_depth_factor", bg["clutter_depth_factor"], low=1.0)
+    _check_range("background.clutter_size_rel", bg["clutter_size_rel"], low=1e-6)
+    _check_range("background.earth_limb_radius_deg", bg["earth_limb_radius_deg"], low=1.0)
+    _check_range("background.earth_disc_radius_deg", bg["earth_disc_radius_deg"], low=0.1)
+    if bg["earth_limb_radius_deg"][1] >= 90 or bg["earth_disc_radius_deg"][1] >= 90:
+        raise ScgenError("background earth radii must stay below 90 degrees")
+    _check_prob("background.earth_limb_prob", bg["earth_limb_prob"])
+    _check_prob("background.earth_albedo", bg["earth_albedo"])
+    _check_distribution("background.probs", bg["probs"])
+    if bg["user_dir"] is not None and bg["user_images"] is None:
+        folder = Path(bg["user_dir"])
+        if not folder.is_dir():
+            raise ScgenError(f"background.user_dir is not a folder: {folder}")
+        bg["user_dir"] = str(folder.resolve())
+        bg["user_images"] = sorted(
+            str(p.resolve()) for p in folder.iterdir() if p.suffix.lower() in USER_IMAGE_SUFFIXES
+        )
+        if not bg["user_images"]:
+            raise ScgenError(f"background.user_dir {folder} holds no {'/'.join(USER_IMAGE_SUFFIXES)} image")
+    if bg["user_images"] is not None:
+        missing = [p for p in bg["user_images"] if not Path(p).is_file()]
+        if missing or not bg["user_images"]:
+            raise ScgenError(f"background.user_images: missing or empty ({missing[:3]})")
+    elif bg["probs"][USER_BACKGROUND] > 0:
+        rest = 1.0 - bg["probs"][USER_BACKGROUND]
+        if rest <= 0:
+            raise ScgenError("background.probs puts all weight on 'user' but background.user_dir is not set")
+        bg["probs"] = {k: (0.0 if k == USER_BACKGROUND else p / rest) for k, p in bg["probs"].items()}
 
 
 def _check_range(name: str, value: Any, low: float) -> None:

@@ -6,24 +6,24 @@ from typing import Any
 
 import numpy as np
 
-from scgen.scenes.config import distance_range_m
+from scgen.scenes.config import USER_BACKGROUND, distance_range_m
 from scgen.scenes.geometry import (
     backproject,
-    look_rotation,
     orthonormal_basis,
     random_direction_in_cone,
     random_rotation,
-    random_unit_vector,
 )
+from scgen.scenes.placement import Blank, place_caster, place_occluder
 from scgen.scenes.rng import factor_rng
+from scgen.scenes.silhouette import CameraView, TargetShape, camera_view, sun_view
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, PropSpec, SceneSpec, SunSpec
 
 OCCLUDER_SHAPES = ("panel", "box", "rod", "debris", "arm")
-CLUTTER_SHAPES = ("box", "panel", "debris", "truss")
-PROP_MATERIALS = ("white_paint", "brushed_metal", "mli_silver", "dark_metal", "mli_gold")
-
-# Centre offset between occluder and target, in target projected radii, per requested occlusion group.
-OCCLUSION_OFFSETS = {"slight": (0.95, 1.35), "moderate": (0.55, 0.95), "heavy": (0.0, 0.55)}
+CASTER_SHAPES = ("panel", "box", "truss", "arm")
+CLUTTER_SHAPES = ("truss", "panel", "box", "debris", "arm")
+PROP_MATERIALS = ("white_paint", "brushed_metal", "mli_silver", "dark_metal", "mli_gold", "solar_cell")
+EARTH_MIN_LIT = 0.08  # share of the frame an Earth background must show as lit day side
+EARTH_TRIES = 32
 
 
 def _choice(rng: np.random.Generator, probs: dict[str, float]) -> str:
@@ -38,38 +38,52 @@ def camera_from_config(cfg: dict[str, Any]) -> CameraSpec:
     return CameraSpec(c["width"], c["height"], tuple(float(k) for k in K), float(c["exposure_ev"]))
 
 
-def sample_scene(seed: int, index: int, cfg: dict[str, Any], diameter_m: float) -> SceneSpec:
-    """The SceneSpec of one sample; depends only on (seed, index, cfg, model diameter)."""
+def sample_scene(
+    seed: int, index: int, cfg: dict[str, Any], diameter_m: float, shape: TargetShape | None = None
+) -> SceneSpec:
+    """The SceneSpec of one sample; depends only on (seed, index, cfg, target geometry).
+
+    `shape` is the target's silhouette geometry (TargetShape.from_mesh(model.mesh)), used to aim
+    occluders and shadow casters; without it a ball of `diameter_m` stands in and the aim is rougher.
+    """
+    shape = shape or TargetShape.ball(diameter_m)
     camera = camera_from_config(cfg)
     K = camera.K_mat
     f = 0.5 * (K[0, 0] + K[1, 1])
 
     R = random_rotation(factor_rng(seed, index, "pose"))
 
-    z_min, z_max = distance_range_m(cfg, diameter_m)
-    z = float(factor_rng(seed, index, "distance").uniform(z_min, z_max))
-    radius_px = f * 0.5 * diameter_m / z
+    # the camera-target distance |t| is uniform over its range (the factor the robustness table bins)
+    d_min, d_max = distance_range_m(cfg, diameter_m)
+    distance = float(factor_rng(seed, index, "distance").uniform(d_min, d_max))
+    radius_px = f * 0.5 * diameter_m / distance
 
     pos_rng = factor_rng(seed, index, "position")
     margin = min(cfg["position"]["inside_radius_frac"] * radius_px, 0.45 * min(camera.width, camera.height))
     u = pos_rng.uniform(margin, camera.width - 1 - margin)
     v = pos_rng.uniform(margin, camera.height - 1 - margin)
-    t = backproject(K, u, v, z)
+    ray = backproject(K, u, v, 1.0)
+    t = distance * ray / np.linalg.norm(ray)
+    target_cam = shape.in_camera(R, t)
+    view = camera_view(K, camera.width, camera.height, target_cam)
 
     sun = _sample_sun(factor_rng(seed, index, "illumination"), cfg["illumination"], t)
-    caster = _sample_shadow_caster(factor_rng(seed, index, "shadow"), cfg["shadow"], t, sun, diameter_m)
+    sun_dir = np.asarray(sun.direction)
     background, clutter = _sample_background(
-        factor_rng(seed, index, "background"), cfg["background"], K, camera, z, radius_px
+        factor_rng(seed, index, "background"), cfg["background"], camera, t, shape.radius, radius_px, sun_dir
     )
     occ_group, occluders = _sample_occluders(
-        factor_rng(seed, index, "occluders"), cfg["occluders"], K, camera, (u, v), z, radius_px
+        factor_rng(seed, index, "occluders"), cfg["occluders"], view, t, shape.radius
+    )
+    caster = _sample_shadow_caster(
+        factor_rng(seed, index, "shadow"), cfg["shadow"], view, t, sun_dir, shape, target_cam, diameter_m
     )
     return SceneSpec(
         seed=int(seed),
         index=int(index),
         camera=camera,
         target=Pose.from_arrays(R, t),
-        distance_m=float(np.linalg.norm(t)),
+        distance_m=distance,
         sun=sun,
         background=background,
         props=tuple(occluders + caster + clutter),
@@ -87,104 +101,95 @@ def _sample_sun(rng: np.random.Generator, cfg: dict[str, Any], t: np.ndarray) ->
 
 
 def _sample_shadow_caster(
-    rng: np.random.Generator, cfg: dict[str, Any], t: np.ndarray, sun: SunSpec, diameter: float
-) -> list[PropSpec]:
-    """A plate between the sun and the target, offset sideways so it shades part of it."""
-    if rng.uniform() >= cfg["caster_prob"]:
+    rng: np.random.Generator, cfg: dict[str, Any], view: CameraView | None, t: np.ndarray,
+    sun_dir: np.ndarray, shape: TargetShape, target_cam: list[np.ndarray], diameter: float,
+) -> list[PropSpec]:  # fmt: skip
+    """With probability caster_prob, a prop on the sun side aimed to shade part of the target."""
+    if rng.uniform() >= cfg["caster_prob"] or view is None:
         return []
-    s = np.asarray(sun.direction)
-    a, b = orthonormal_basis(s)
-    phi = rng.uniform(0, 2 * np.pi)
-    offset = rng.uniform(*cfg["offset_diam"]) * diameter
-    centre = (
-        t + s * rng.uniform(*cfg["distance_diam"]) * diameter + offset * (np.cos(phi) * a + np.sin(phi) * b)
-    )
-    side = rng.uniform(*cfg["size_diam"]) * diameter
-    size = (side, side * rng.uniform(0.4, 1.0), 0.01 * diameter)
-    R = look_rotation(s, rng)
-    return [
-        PropSpec(
-            "shadow_caster",
-            "panel",
-            size,
-            Pose.from_arrays(R, centre),
-            "dark_metal",
-            int(rng.integers(2**31)),
-        )
-    ]
+    sun = sun_view(np.stack(orthonormal_basis(sun_dir)), t, shape.radius, target_cam)
+    blank = Blank.draw(rng, "shadow_caster", CASTER_SHAPES, PROP_MATERIALS, facing=sun_dir)
+    prop = place_caster(rng, cfg, view, sun, t, sun_dir, shape.radius, diameter, blank)
+    return [prop] if prop is not None else []
+
+
+def _sample_occluders(
+    rng: np.random.Generator, cfg: dict[str, Any], view: CameraView | None, t: np.ndarray, radius: float
+) -> tuple[str, list[PropSpec]]:
+    """The requested occlusion group and the occluder aimed at it ('none': maybe a distractor)."""
+    group = _choice(rng, cfg["group_probs"])
+    if view is None or (group == "none" and rng.uniform() >= cfg["distractor_prob"]):
+        return group, []
+    blank = Blank.draw(rng, "occluder", OCCLUDER_SHAPES, PROP_MATERIALS)
+    return group, [place_occluder(rng, cfg, view, t, radius, group, blank)]
 
 
 def _sample_background(
-    rng: np.random.Generator,
-    cfg: dict[str, Any],
-    K: np.ndarray,
-    camera: CameraSpec,
-    z_target: float,
-    radius_px: float,
-) -> tuple[BackgroundSpec, list[PropSpec]]:
+    rng: np.random.Generator, cfg: dict[str, Any], camera: CameraSpec, t: np.ndarray, radius: float,
+    radius_px: float, sun_dir: np.ndarray,
+) -> tuple[BackgroundSpec, list[PropSpec]]:  # fmt: skip
     kind = _choice(rng, cfg["probs"])
     bg_seed = int(rng.integers(2**31))
     params: dict[str, Any] = {}
     clutter: list[PropSpec] = []
     if kind == "earth":
-        centre_dir = random_direction_in_cone(rng, np.array([0.0, 0.0, 1.0]), np.deg2rad(50))
-        params = {
-            "centre_dir": [float(x) for x in centre_dir],
-            "angular_radius_deg": float(rng.uniform(25, 60)),
-            "albedo": 0.3,
-        }
+        params = _sample_earth(rng, cfg, camera, sun_dir)
+    elif kind == USER_BACKGROUND:
+        images = cfg["user_images"]
+        params = {"image": images[int(rng.integers(len(images)))]}
     elif kind == "cluttered":
-        n = int(rng.integers(cfg["clutter_count"][0], cfg["clutter_count"][1] + 1))
+        K = camera.K_mat
         f = 0.5 * (K[0, 0] + K[1, 1])
+        n = int(rng.integers(cfg["clutter_count"][0], cfg["clutter_count"][1] + 1))
         for _ in range(n):
-            depth = z_target * rng.uniform(*cfg["clutter_depth_factor"])
-            u = rng.uniform(0, camera.width - 1)
-            v = rng.uniform(0, camera.height - 1)
-            half = rng.uniform(0.6, 2.0) * radius_px * depth / f
-            shape = CLUTTER_SHAPES[int(rng.integers(len(CLUTTER_SHAPES)))]
-            clutter.append(_prop(rng, "clutter", shape, backproject(K, u, v, depth), half))
+            blank = Blank.draw(rng, "clutter", CLUTTER_SHAPES, PROP_MATERIALS)
+            depth = t[2] * rng.uniform(*cfg["clutter_depth_factor"])
+            u, v = rng.uniform(0, camera.width - 1), rng.uniform(0, camera.height - 1)
+            half = rng.uniform(*cfg["clutter_size_rel"]) * radius_px * depth / f
+            depth = max(depth, t[2] + radius + blank.bound * half)  # wholly behind the target
+            clutter.append(blank.spec(half, backproject(K, u, v, depth)))
     return BackgroundSpec(kind, bg_seed, params), clutter
 
 
-def _sample_occluders(
-    rng: np.random.Generator,
-    cfg: dict[str, Any],
-    K: np.ndarray,
-    camera: CameraSpec,
-    centre_px: tuple[float, float],
-    z_target: float,
-    radius_px: float,
-) -> tuple[str, list[PropSpec]]:
-    """Place non-target objects in front of the target so the requested occlusion group is likely."""
-    group = _choice(rng, cfg["group_probs"])
-    f = 0.5 * (K[0, 0] + K[1, 1])
-    if group == "none":
-        if rng.uniform() >= cfg["distractor_prob"]:
-            return group, []
-        offset_range = (1.8, 3.0)
-    else:
-        offset_range = OCCLUSION_OFFSETS[group]
-    depth = z_target * rng.uniform(*cfg["depth_frac"])
-    phi = rng.uniform(0, 2 * np.pi)
-    offset = rng.uniform(*offset_range) * radius_px
-    u = centre_px[0] + offset * np.cos(phi)
-    v = centre_px[1] + offset * np.sin(phi)
-    half = rng.uniform(*cfg["size_rel"]) * radius_px * depth / f
-    shape = OCCLUDER_SHAPES[int(rng.integers(len(OCCLUDER_SHAPES)))]
-    return group, [_prop(rng, "occluder", shape, backproject(K, u, v, depth), half)]
+def _sample_earth(
+    rng: np.random.Generator, cfg: dict[str, Any], camera: CameraSpec, sun_dir: np.ndarray
+) -> dict[str, Any]:
+    """An Earth limb (low orbit) or disc (high orbit) in view, its part in the frame mostly day side.
+
+    The Earth is a unit sphere seen at angular radius rho; its centre direction makes angle theta
+    with the optical axis (theta near rho puts the limb across the frame). Placements are redrawn
+    (a bounded number of times, deterministically) until the frame shows enough lit Earth.
+    """
+    K = camera.K_mat
+    half_diag = np.arctan(np.hypot(0.5 * camera.width / K[0, 0], 0.5 * camera.height / K[1, 1]))
+    v, u = np.mgrid[0 : camera.height : camera.height / 12, 0 : camera.width : camera.width / 16]
+    rays = np.stack([(u.ravel() - K[0, 2]) / K[0, 0], (v.ravel() - K[1, 2]) / K[1, 1], np.ones(u.size)], 1)
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    x, y = orthonormal_basis(np.array([0.0, 0.0, 1.0]))
+    best: tuple[float, dict[str, Any]] = (-1.0, {})
+    for _ in range(EARTH_TRIES):
+        limb = bool(rng.uniform() < cfg["earth_limb_prob"])
+        if limb:
+            rho = np.deg2rad(rng.uniform(*cfg["earth_limb_radius_deg"]))
+            theta = rho + rng.uniform(-0.8, 0.3) * half_diag
+        else:
+            rho = np.deg2rad(rng.uniform(*cfg["earth_disc_radius_deg"]))
+            theta = rng.uniform(0.0, max(half_diag - 0.3 * rho, 0.0))
+        az = rng.uniform(0, 2 * np.pi)
+        centre = np.cos(theta) * np.array([0.0, 0.0, 1.0]) + np.sin(theta) * (np.cos(az) * x + np.sin(az) * y)
+        params = {"centre_dir": [float(c) for c in centre], "angular_radius_deg": float(np.rad2deg(rho)),
+                  "albedo": float(cfg["earth_albedo"]), "limb": limb}  # fmt: skip
+        score = _earth_lit_share(rays, centre / np.sin(rho), sun_dir)
+        if score >= EARTH_MIN_LIT:
+            return params
+        best = max(best, (score, params), key=lambda b: b[0])
+    return best[1]
 
 
-def _prop(rng: np.random.Generator, role: str, shape: str, centre: np.ndarray, half: float) -> PropSpec:
-    """A prop of projected half-size `half` (metres at its depth) with a random orientation."""
-    aspect = {
-        "panel": (2.0, 2.0 * rng.uniform(0.4, 1.0), 0.04),
-        "box": (2.0, 2.0 * rng.uniform(0.5, 1.0), 2.0 * rng.uniform(0.5, 1.0)),
-        "rod": (2.0, 0.12, 0.12),
-        "debris": (2.0, 2.0 * rng.uniform(0.3, 0.8), 2.0 * rng.uniform(0.2, 0.6)),
-        "arm": (2.0, 0.25, 0.25),
-        "truss": (2.0, 0.6, 0.6),
-    }[shape]
-    size = tuple(float(a * half) for a in aspect)
-    R = random_rotation(rng) if shape != "panel" else look_rotation(random_unit_vector(rng), rng)
-    material = PROP_MATERIALS[int(rng.integers(len(PROP_MATERIALS)))]
-    return PropSpec(role, shape, size, Pose.from_arrays(R, centre), material, int(rng.integers(2**31)))
+def _earth_lit_share(rays: np.ndarray, centre: np.ndarray, sun_dir: np.ndarray) -> float:
+    """Share of the probe rays that see the unit sphere at `centre` on its day side."""
+    b = rays @ centre
+    disc = b * b - (centre @ centre - 1.0)
+    hit = disc > 0
+    normal = rays[hit] * (b[hit] - np.sqrt(disc[hit]))[:, None] - centre
+    return float(np.sum(normal @ sun_dir > 0.15) / len(rays))

@@ -1,0 +1,157 @@
+"""`scgen preview`: one contact-sheet PNG showing that every factor varies, and what the labels are.
+
+Per sample: the RGB image; below it, zoomed on the target, the mask outlines (full: cyan, visible:
+yellow) over the image, the visible mask (occluded part of the full mask in grey) and the xyz map
+in colour; then the factor labels as the dataset records them (measured shadow and occlusion).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import cv2
+import numpy as np
+from PIL import Image
+
+from scgen.annotate import Annotation, annotate
+from scgen.errors import ScgenError
+from scgen.scenes.spec import SceneSpec
+
+TILE_W = 320  # width of a sample's RGB tile in the sheet; the three label panels share it
+COLUMNS = 4
+CAPTION_H = 46
+ZOOM_MARGIN = 1.3  # the zoomed panels show the full-mask box enlarged by this factor
+FULL_COLOUR = (0, 220, 255)
+VISIB_COLOUR = (255, 230, 0)
+
+
+def xyz_colours(xyz: np.ndarray, mask: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Model coordinates mapped to RGB over the model's bounding box; black off the mask."""
+    rgb = np.clip((xyz - lo) / np.maximum(hi - lo, 1e-9), 0, 1) * 255
+    return np.where(mask[..., None], rgb, 0).astype(np.uint8)
+
+
+def outlines(rgb: np.ndarray, ann: Annotation) -> np.ndarray:
+    """The image with the full-mask (cyan) and visible-mask (yellow) outlines."""
+    out = rgb.copy()
+    for mask, colour in ((ann.mask, FULL_COLOUR), (ann.mask_visib, VISIB_COLOUR)):
+        contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        cv2.drawContours(out, contours, -1, colour, 1)
+    return out
+
+
+def zoom(img: np.ndarray, bbox: list[int], size: tuple[int, int]) -> np.ndarray:
+    """The region around bbox [x, y, w, h] (aspect of `size` = (w, h), zero-padded), resized to `size`."""
+    x, y, w, h = bbox
+    if w == 0 or h == 0:
+        return np.zeros((size[1], size[0], 3), np.uint8)
+    cx, cy = x + 0.5 * w, y + 0.5 * h
+    half_w = 0.5 * ZOOM_MARGIN * max(w, h * size[0] / size[1]) + 2
+    half_h = half_w * size[1] / size[0]
+    x0, y0 = int(round(cx - half_w)), int(round(cy - half_h))
+    x1, y1 = int(round(cx + half_w)), int(round(cy + half_h))
+    pad = max(0, -x0, -y0, x1 - img.shape[1], y1 - img.shape[0])
+    padded = np.pad(img, ((pad, pad), (pad, pad), (0, 0)))
+    crop = padded[y0 + pad : y1 + pad, x0 + pad : x1 + pad]
+    return cv2.resize(crop, size, interpolation=cv2.INTER_NEAREST)
+
+
+def labels(spec: SceneSpec, ann: Annotation, distance_group: str) -> list[str]:
+    """Caption lines: the factor groups of the robustness table, with their measured values."""
+    caster = "caster" if spec.shadow_caster else "no caster"
+    return [
+        f"#{spec.index} {spec.sun.level} (EV{spec.camera.exposure_ev:+.1f})  {spec.background.kind}"
+        f"  {distance_group} {spec.distance_m:.2f} m",
+        f"shadow {ann.shadow_label} {ann.shadow_fraction:.2f} ({caster})",
+        f"occlusion {ann.occlusion_group} {ann.r_occ:.2f} (aim {spec.requested_occlusion})",
+    ]
+
+
+def sample_tile(rgb: np.ndarray, ann: Annotation, xyz_rgb: np.ndarray, caption: list[str]) -> np.ndarray:
+    """One sample's block: RGB on top, zoomed outlines | visible mask | xyz below, caption at the bottom."""
+    h, w = rgb.shape[:2]
+    big = cv2.resize(rgb, (TILE_W, round(TILE_W * h / w)), interpolation=cv2.INTER_AREA)
+    size = (TILE_W // 3, round(TILE_W // 3 * h / w))
+    visib = np.where(ann.mask_visib, 255, np.where(ann.mask, 90, 0)).astype(np.uint8)
+    panels = [outlines(rgb, ann), np.repeat(visib[..., None], 3, axis=2), xyz_rgb]
+    small = np.hstack([zoom(p, ann.bbox_obj, size) for p in panels])
+    small = np.pad(small, ((0, 0), (0, TILE_W - small.shape[1]), (0, 0)))
+    text = np.zeros((CAPTION_H, TILE_W, 3), np.uint8)
+    for k, line in enumerate(caption):
+        cv2.putText(text, line, (3, 12 + 14 * k), cv2.FONT_HERSHEY_PLAIN, 0.75, (235, 235, 235), 1,
+                    cv2.LINE_AA)  # fmt: skip
+    return np.vstack([big, small, text])
+
+
+def contact_sheet(tiles: list[np.ndarray], columns: int = COLUMNS, gap: int = 4) -> np.ndarray:
+    """Tiles (equal size) in a grid with grey gaps."""
+    h, w = tiles[0].shape[:2]
+    rows = -(-len(tiles) // columns)
+    sheet = np.full((rows * (h + gap) + gap, columns * (w + gap) + gap, 3), 60, np.uint8)
+    for k, tile in enumerate(tiles):
+        r, c = divmod(k, columns)
+        y, x = gap + r * (h + gap), gap + c * (w + gap)
+        sheet[y : y + h, x : x + w] = tile
+    return sheet
+
+
+def save_png(sheet: np.ndarray, path: Path) -> None:
+    """Palette PNG (256 adaptive colours): a 16-sample sheet stays well under a megabyte."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(sheet).quantize(256, method=Image.Quantize.MEDIANCUT).save(path, optimize=True)
+
+
+def build_preview(
+    n: int, seed: int, backend_name: str, resolution: tuple[int, int] | None, quality: str,
+    config_path: Path | None,
+) -> np.ndarray:  # fmt: skip
+    """Sample, render and annotate n scenes exactly as `scgen render` does; return the sheet."""
+    from scgen.model import load_target
+    from scgen.render.base import create_backend
+    from scgen.scenes import load_config, sample_scene
+    from scgen.scenes.config import distance_range_m
+    from scgen.scenes.silhouette import TargetShape
+
+    cfg = load_config(config_path, None, resolution)
+    model = load_target()
+    shape = TargetShape.from_mesh(model.mesh)
+    lo, hi = model.mesh.bounds
+    z_lo, z_hi = distance_range_m(cfg, model.diameter)
+    backend = create_backend(backend_name, model, quality=quality)
+    tiles = []
+    try:
+        for i in range(n):
+            spec = sample_scene(seed, i, cfg, model.diameter, shape)
+            buffers = backend.render(spec)
+            ann = annotate(spec, buffers)
+            third = min(2, int(3 * (spec.target.t_vec[2] - z_lo) / (z_hi - z_lo)))
+            caption = labels(spec, ann, ("near", "middle", "far")[third])
+            tiles.append(sample_tile(buffers.rgb, ann, xyz_colours(ann.xyz, ann.mask_visib, lo, hi), caption))
+    finally:
+        backend.close()
+    return contact_sheet(tiles)
+
+
+@click.command()
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for preview.png.")
+@click.option("--n", "n", type=int, default=16, show_default=True, help="Number of samples (ids 0..n-1).")
+@click.option("--backend", default="blender", show_default=True, help="Renderer: blender or mitsuba.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Dataset seed (same samples as render).")
+@click.option("--resolution", default="320x240", show_default=True, help="Image size WxH.")
+@click.option("--quality", default="draft", show_default=True, help="draft | default | high.")
+@click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,
+              help="Sampling config file (see docs/config.md).")  # fmt: skip
+def preview(out: Path, n: int, backend: str, seed: int, resolution: str, quality: str, config_path) -> None:
+    """Render n samples in memory and write OUT/preview.png: RGB, masks, xyz and factor labels."""
+    from scgen.cli import parse_resolution
+
+    try:
+        if n <= 0:
+            raise ScgenError(f"--n must be a positive number of samples, got {n}")
+        sheet = build_preview(n, seed, backend, parse_resolution(resolution), quality, config_path)
+    except ScgenError as exc:
+        raise click.ClickException(str(exc)) from None
+    path = Path(out) / "preview.png"
+    save_png(sheet, path)
+    click.echo(f"wrote {path} ({n} samples, {backend})")

@@ -1,0 +1,99 @@
+"""Spacecraft material classes as Mitsuba BSDFs, with procedural, deterministic detail textures.
+
+Base parameters match the Blender backend's finishes (principled, metals with metallic 1 and their
+normal-incidence reflectance as base colour): crinkled MLI foil (a tileable ridged normal map),
+solar cells (a grid of cells and busbars), anisotropic brushed metal, paint, dark metal.
+Textures are laid on by box projection in the object's own frame, sized by the object's size.
+Only shading changes: the geometry (and so every label) is the same triangles as before.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mitsuba as mi
+import numpy as np
+
+MLI = {"mli_gold": ((1.0, 0.71, 0.29), 0.5), "mli_silver": ((0.95, 0.93, 0.88), 0.45)}  # colour, roughness
+CRINKLE_TILES_PER_SIZE = 2.0  # a tile spans half the object: no visible repetition on a face
+CELLS_PER_SIZE = 40.0  # solar cells across the object
+BUSBAR_COLOUR = (0.6, 0.6, 0.62)
+CELL_COLOUR = (0.02, 0.03, 0.09)
+TEXTURE_SEED = 2024  # the detail textures are fixed assets, identical for every sample
+
+
+def crinkle_normal_map(size: int = 512, waves: int = 64, slope: float = 0.02) -> np.ndarray:
+    """A tileable tangent-space normal map (size x size x 3 in [0, 1]) of crumpled foil.
+
+    Ridged sum of random integer-frequency plane waves (2 to 14 per tile, so about 4 to 28 creases
+    per object size): creases where a wave crosses zero. `slope` scales the height gradient.
+    """
+    rng = np.random.default_rng(TEXTURE_SEED)
+    y, x = np.mgrid[0:size, 0:size] / size
+    h = np.zeros((size, size))
+    for _ in range(waves):
+        k = rng.uniform(2, 14)
+        a = rng.uniform(0, np.pi)
+        kx, ky = np.round(k * np.cos(a)), np.round(k * np.sin(a))  # integer: the tile wraps seamlessly
+        amp = 1.0 / max(1.0, float(np.hypot(kx, ky)))
+        h -= amp * np.abs(np.sin(np.pi * (kx * x + ky * y) + rng.uniform(0, np.pi)))
+    gy, gx = np.gradient(h, 1.0 / size)
+    n = np.stack([-slope * gx, -slope * gy, np.ones_like(h)], -1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return (0.5 * n + 0.5).astype(np.float32)
+
+
+def cell_texture(size: int = 64) -> np.ndarray:
+    """One solar cell (a tile): dark blue with a light frame and two busbars, linear RGB."""
+    tex = np.tile(np.asarray(CELL_COLOUR, np.float32), (size, size, 1))
+    line = max(1, size // 32)
+    for a in (slice(0, line), slice(size - line, size)):
+        tex[a, :] = BUSBAR_COLOUR
+        tex[:, a] = BUSBAR_COLOUR
+    for c in (size // 3, 2 * size // 3):
+        tex[:, c - line // 2 : c - line // 2 + line] = BUSBAR_COLOUR
+    return tex
+
+
+def _bitmap(array: np.ndarray, raw: bool) -> dict[str, Any]:
+    return {"type": "bitmap", "bitmap": mi.Bitmap(array), "raw": raw, "filter_type": "bilinear",
+            "wrap_mode": "repeat"}  # fmt: skip
+
+
+def _principled(base: Any, roughness: float, metallic: float = 0.0, **extra: float) -> dict[str, Any]:
+    colour = base if isinstance(base, dict) else {"type": "rgb", "value": list(base)}
+    return {"type": "principled", "base_color": colour, "roughness": roughness, "metallic": metallic, **extra}
+
+
+def build_bsdfs() -> dict[str, mi.BSDF]:
+    """One BSDF object per material class, built once per backend and shared by every mesh."""
+    crinkle = _bitmap(crinkle_normal_map(), raw=True)
+    dicts = {
+        name: {"type": "normalmap", "normalmap": crinkle, "bsdf": _principled(colour, roughness, 1.0)}
+        for name, (colour, roughness) in MLI.items()
+    }
+    dicts["brushed_metal"] = _principled((0.91, 0.92, 0.92), 0.39, 1.0, anisotropic=0.5)
+    dicts["solar_cell"] = _principled(_bitmap(cell_texture(), raw=False), 0.15, specular=0.6)
+    dicts["dark_metal"] = _principled((0.05, 0.05, 0.055), 0.4, 0.5)
+    dicts["white_paint"] = _principled((0.75, 0.75, 0.72), 0.6)
+    return {name: mi.load_dict(d) for name, d in dicts.items()}
+
+
+def texture_scale(material: str, size: float) -> float:
+    """UV units per metre: texture tiles are fixed fractions of the object's size (target diameter,
+    or a prop's longest side), so detail keeps its look on big background structures too."""
+    per_size = CELLS_PER_SIZE if material == "solar_cell" else CRINKLE_TILES_PER_SIZE
+    return per_size / size
+
+
+def box_uv(vertices: np.ndarray, faces: np.ndarray, scale: float) -> np.ndarray:
+    """Box-projected UVs of the unwelded triangles (3F x 2: three corners per face, in face order).
+
+    Each face takes the two coordinates orthogonal to the dominant axis of its normal, in the frame
+    `vertices` are given in (the object's own frame, so textures stick to the object).
+    """
+    tri = vertices[faces]  # F x 3 x 3
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    keep = np.array([[1, 2], [2, 0], [0, 1]])[np.argmax(np.abs(normal), axis=1)]  # F x 2
+    uv = np.take_along_axis(tri, np.repeat(keep[:, None, :], 3, axis=1), axis=2) * scale
+    return uv.reshape(-1, 2)

@@ -1,0 +1,61 @@
+"""Backgrounds: deterministic, visibly different per kind; the user's own images as a fifth kind."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from scgen.errors import ScgenError
+from scgen.render.backgrounds import background_image, srgb_to_linear
+from scgen.scenes import load_config, sample_scene
+
+SMALL = (160, 120)
+
+
+def kind_specs(kind: str, n: int = 4, **background) -> list:
+    cfg = load_config(overrides={"background": {"probs": {kind: 1.0}, **background}}, resolution=SMALL)
+    return [sample_scene(2, i, cfg, 0.2) for i in range(n)]
+
+
+def test_background_is_deterministic_and_kinds_differ():
+    mean = {}
+    for kind in ("clean", "complex", "earth", "cluttered"):
+        specs = kind_specs(kind)
+        images = [background_image(s) for s in specs]
+        assert np.array_equal(images[0], background_image(specs[0]))
+        assert images[0].shape == (SMALL[1], SMALL[0], 3) and images[0].dtype == np.float32
+        mean[kind] = float(np.mean(images))
+    assert mean["clean"] < mean["cluttered"] < mean["complex"] < mean["earth"]
+    assert mean["clean"] < 0.005  # black space with sparse stars
+
+
+def test_earth_shows_a_lit_part_in_the_frame():
+    for spec in kind_specs("earth", n=8):
+        lit = background_image(spec).max(axis=2) > 0.02 * spec.sun.irradiance / 1361.0
+        assert lit.mean() > 0.05
+
+
+def test_user_folder_is_a_fifth_kind(tmp_path):
+    colours = {"a.png": (200, 30, 30), "b.jpg": (20, 120, 250)}
+    for name, bgr in colours.items():
+        cv2.imwrite(str(tmp_path / name), np.full((90, 200, 3), bgr[::-1], np.uint8))
+    (tmp_path / "notes.txt").write_text("not an image")
+    cfg = load_config(overrides={"background": {"user_dir": str(tmp_path)}})
+    assert [p.rsplit("/", 1)[1] for p in cfg["background"]["user_images"]] == ["a.png", "b.jpg"]
+    assert cfg["background"]["probs"]["user"] == pytest.approx(0.2)
+    specs = kind_specs("user", n=6, user_dir=str(tmp_path))
+    assert {s.background.params["image"].rsplit("/", 1)[1] for s in specs} == set(colours)
+    for spec in specs:
+        rgb = colours[spec.background.params["image"].rsplit("/", 1)[1]]
+        expected = srgb_to_linear(np.array(rgb, np.float32) / 255.0)
+        assert np.allclose(background_image(spec), expected, atol=0.01)
+
+
+def test_user_share_without_a_folder_goes_to_the_other_kinds(tmp_path):
+    probs = load_config()["background"]["probs"]
+    assert probs["user"] == 0.0 and probs["clean"] == pytest.approx(0.25)
+    with pytest.raises(ScgenError, match="user_dir"):
+        load_config(overrides={"background": {"user_dir": str(tmp_path / "missing")}})
+    with pytest.raises(ScgenError, match="holds no"):
+        load_config(overrides={"background": {"user_dir": str(tmp_path)}})
