@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 demo: install
-	$(BIN)/scgen render --n 8 --out demo_out --backend mitsuba --seed 0
+	$(BIN)/scgen render --n 8 --out demo_out --seed 0
 	$(BIN)/scgen stats demo_out
 
 test: install

@@ -1,0 +1,123 @@
+"""The six spacecraft material classes as Cycles node trees, and the probe material of the aux render.
+
+Base parameters are shared with the Mitsuba backend (scgen/render/mitsuba_materials.py): metals
+are Principled with metallic 1 and their normal-incidence reflectance as base colour.
+Details scale with the model's diameter, so any user model gets the same look: MLI foil gets a
+crinkled normal (bumped fractal noise), solar cells a box-projected grid of cells and busbars.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from scgen.model import MATERIALS
+
+
+@dataclass(frozen=True)
+class Finish:
+    """Principled BSDF inputs of one material class, plus the procedural detail it gets."""
+
+    base: tuple[float, float, float]
+    roughness: float
+    metallic: float = 0.0
+    specular: float = 0.5  # Specular IOR Level: 0.5 is F0 = 0.04 (IOR 1.5); Mitsuba's `specular` 0.6 -> 0.6
+    anisotropic: float = 0.0
+    detail: str = ""  # "crinkle", "cells" or ""
+
+
+FINISHES = {
+    "mli_gold": Finish((1.0, 0.71, 0.29), roughness=0.5, metallic=1.0, detail="crinkle"),
+    "mli_silver": Finish((0.95, 0.93, 0.88), roughness=0.45, metallic=1.0, detail="crinkle"),
+    "brushed_metal": Finish((0.91, 0.92, 0.92), roughness=0.39, metallic=1.0, anisotropic=0.5),
+    "solar_cell": Finish((0.02, 0.03, 0.09), roughness=0.15, specular=0.6, detail="cells"),
+    "dark_metal": Finish((0.05, 0.05, 0.055), roughness=0.4, metallic=0.5),
+    "white_paint": Finish((0.75, 0.75, 0.72), roughness=0.6),
+}
+CRINKLES_PER_DIAMETER = 30.0  # foil wrinkles across the model
+CELLS_PER_DIAMETER = 40.0  # solar cells across the model
+BUSBAR_COLOUR = (0.6, 0.6, 0.62)
+
+
+def build_materials(bpy: ModuleType, diameter: float) -> dict[str, Any]:
+    """One bpy material per class in scgen.model.MATERIALS, details sized for a model of `diameter` m."""
+    cells = _cell_image(bpy)
+    return {name: _principled(bpy, name, FINISHES[name], diameter, cells) for name in MATERIALS}
+
+
+def probe_material(bpy: ModuleType) -> Any:
+    """White diffuse + translucent: lit from either side, the aux value is |n.s| x sun visibility."""
+    mat = bpy.data.materials.new("scgen_probe")
+    nodes, links = _clear(mat)
+    add = nodes.new("ShaderNodeAddShader")
+    for k, kind in enumerate(("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfTranslucent")):
+        bsdf = nodes.new(kind)
+        bsdf.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+        links.new(bsdf.outputs[0], add.inputs[k])
+    links.new(add.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    return mat
+
+
+def _clear(mat: Any) -> tuple[Any, Any]:
+    nodes = mat.node_tree.nodes
+    for node in list(nodes):
+        nodes.remove(node)
+    return nodes, mat.node_tree.links
+
+
+def _principled(bpy: ModuleType, name: str, finish: Finish, diameter: float, cells: Any) -> Any:
+    mat = bpy.data.materials.new(name)
+    nodes, links = _clear(mat)
+    bsdf = nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Base Color"].default_value = (*finish.base, 1.0)
+    bsdf.inputs["Roughness"].default_value = finish.roughness
+    bsdf.inputs["Metallic"].default_value = finish.metallic
+    bsdf.inputs["Specular IOR Level"].default_value = finish.specular
+    bsdf.inputs["Anisotropic"].default_value = finish.anisotropic
+    links.new(bsdf.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    coords = nodes.new("ShaderNodeTexCoord").outputs["Object"]
+    if finish.detail == "crinkle":
+        noise = nodes.new("ShaderNodeTexNoise")
+        noise.inputs["Scale"].default_value = CRINKLES_PER_DIAMETER / diameter
+        noise.inputs["Detail"].default_value = 2.0
+        bump = nodes.new("ShaderNodeBump")
+        bump.inputs["Strength"].default_value = 0.6
+        bump.inputs["Distance"].default_value = 0.02 * diameter
+        links.new(coords, noise.inputs["Vector"])
+        links.new(noise.outputs["Fac"], bump.inputs["Height"])
+        links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
+    elif finish.detail == "cells":
+        scale = nodes.new("ShaderNodeVectorMath")
+        scale.operation = "SCALE"
+        scale.inputs["Scale"].default_value = CELLS_PER_DIAMETER / diameter
+        tex = nodes.new("ShaderNodeTexImage")
+        tex.image, tex.projection, tex.projection_blend = cells, "BOX", 0.2
+        ramp = nodes.new("ShaderNodeValToRGB")
+        ramp.color_ramp.elements[0].color = (*finish.base, 1.0)
+        ramp.color_ramp.elements[1].color = (*BUSBAR_COLOUR, 1.0)
+        links.new(coords, scale.inputs[0])
+        links.new(scale.outputs["Vector"], tex.inputs["Vector"])
+        links.new(tex.outputs["Color"], ramp.inputs["Fac"])
+        links.new(ramp.outputs["Color"], bsdf.inputs["Base Color"])
+        links.new(tex.outputs["Color"], bsdf.inputs["Metallic"])  # busbars and gaps are metal
+    return mat
+
+
+def cell_pattern(size: int = 16) -> np.ndarray:
+    """One solar cell as a size x size mask: 1 on the cell gap (first row/column) and two busbars."""
+    mask = np.zeros((size, size), np.float32)
+    mask[0, :] = mask[:, 0] = 1.0
+    mask[:, size // 3] = mask[:, 2 * size // 3] = 0.7
+    return mask
+
+
+def _cell_image(bpy: ModuleType) -> Any:
+    mask = cell_pattern()
+    img = bpy.data.images.new("scgen_cells", mask.shape[1], mask.shape[0], alpha=False, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    rgba = np.stack([mask, mask, mask, np.ones_like(mask)], axis=-1)[::-1]  # Blender rows run bottom-up
+    img.pixels.foreach_set(rgba.ravel())
+    return img
