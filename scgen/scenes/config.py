@@ -171,7 +171,7 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
     if cam["fx"] <= 0 or cam["fy"] <= 0:
         raise ScgenError(f"camera focal lengths must be positive, got fx={cam['fx']} fy={cam['fy']}")
     if cam["fx"] != cam["fy"]:  # neither renderer models non-square pixels exactly (Blender 5.0 EXR, Mitsuba)
-        raise ScgenError(f"camera.fx and camera.fy must be equal (square pixels), got {cam['fx']}/{cam['fy']}")
+        raise ScgenError(f"camera.fx and camera.fy must be equal (square pixels): {cam['fx']} vs {cam['fy']}")
     cam["cx"] = (cam["width"] - 1) / 2 if cam["cx"] is None else float(cam["cx"])
     cam["cy"] = (cam["height"] - 1) / 2 if cam["cy"] is None else float(cam["cy"])
 
