@@ -51,6 +51,7 @@ class RenderJob:
     ratios: tuple[float, float, float] = (0.7, 0.1, 0.2)
     shard: tuple[int, int] = (0, 1)
     workers: int = 1
+    threads: int | None = None  # renderer threads per worker; None = cores // workers
     executor: str = "local"
     ray_address: str | None = None
     write: WriteOptions = field(default_factory=WriteOptions)
@@ -194,7 +195,8 @@ def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
     ]
     settings = WorkerSettings(
         out=job.out, backend=job.backend, quality=job.quality, device=job.device, model_path=job.model_path,
-        keep_scale=job.keep_scale, write=job.write, threads=max(1, (os.cpu_count() or 1) // job.workers),
+        keep_scale=job.keep_scale, write=job.write,
+        threads=job.threads or max(1, (os.cpu_count() or 1) // job.workers),
     )  # fmt: skip
     timings = {"render_s": 0.0, "other_s": 0.0}
     bar = tqdm(
