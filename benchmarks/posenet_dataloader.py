@@ -1,0 +1,106 @@
+"""posenet input pipeline and training step speed.
+
+Prints (1) training samples/s of one loader process with the paper's augmentations (DZI, brightness/
+contrast at p=0.8, background replacement at p=0.5) at the paper's 256/64 resolution, (2) the DataLoader
+throughput with --workers processes, (3) the training step time (forward, losses, backward, Ranger step)
+of --config on the current device (paper on a GPU, smoke on a CPU by default).
+
+Usage: python benchmarks/posenet_dataloader.py [--data DIR] [--workers 2] [--config paper|smoke] [--steps 5]
+Without --data, 48 samples at 640x480 are rendered with Mitsuba into a temporary folder first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+from torch.utils.data import DataLoader
+
+from posenet.config import load_config
+from posenet.data import EpochSampler, open_split
+from posenet.losses import pose_losses
+from posenet.models import build_model
+from posenet.train import make_optimizer, worker_init
+from scgen.runner import RenderJob, run_render
+
+
+def loader_rate(data: Path, workers: int, n: int) -> tuple[float, float]:
+    """(samples/s in this process, samples/s through a DataLoader with `workers` processes)."""
+    cfg = load_config("paper")
+    mc = cfg.model_config()
+    ds = open_split(data, "train", cfg.data, mc, train=True)
+    for i in range(min(len(ds), 8)):  # build the background pool and warm the file cache
+        ds[(0, i)]
+    tic = time.perf_counter()
+    for k in range(n):
+        ds[(1 + k // len(ds), k % len(ds))]
+    single = n / (time.perf_counter() - tic)
+    sampler = EpochSampler(len(ds), 1, seed=0)
+    loader = DataLoader(ds, batch_size=None, sampler=sampler, num_workers=workers, worker_init_fn=worker_init)
+    done, tic = 0, None
+    for epoch in range(10**6):
+        sampler.set_epoch(epoch)
+        for _ in loader:
+            done += 1
+            if done == workers * 4:  # start the clock once every process is up and warm
+                tic, done = time.perf_counter(), 0
+            if tic is not None and done >= n:
+                return single, done / (time.perf_counter() - tic)
+    raise AssertionError("unreachable")
+
+
+def step_time(data: Path, config: str, steps: int) -> tuple[float, int, str]:
+    """(seconds per training step, batch size, device) for `config`'s model and batch."""
+    cfg = load_config(config)
+    mc = cfg.model_config()
+    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    ds = open_split(data, "train", cfg.data, mc, train=True)
+    bs = cfg.optim.batch_size
+    items = [ds[(0, i % len(ds))] for i in range(bs)]
+    batch = {k: torch.stack([it[k] for it in items]).to(device) for k in items[0]}
+    model = build_model(cfg.variant, mc).to(device).train()
+    opt, _ = make_optimizer(model, cfg.optim, total_iters=steps + 2)
+    pm = torch.from_numpy(ds.obj.pm_points / ds.obj.extent.max()).float().to(device)
+    times = []
+    for _ in range(steps + 2):
+        tic = time.perf_counter()
+        loss, _ = pose_losses(model(batch["roi_img"], batch["roi_coord2d"]), batch, pm, cfg.loss)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        times.append(time.perf_counter() - tic)
+    return sum(times[2:]) / steps, bs, torch.cuda.get_device_name() if device.type == "cuda" else "cpu"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", type=Path, default=None)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--samples", type=int, default=300, help="Samples timed per measurement.")
+    ap.add_argument(
+        "--config", default=None, help="Model/batch for the step time [paper on GPU, smoke on CPU]."
+    )
+    ap.add_argument("--steps", type=int, default=5)
+    args = ap.parse_args()
+    data = args.data
+    if data is None:
+        data = Path(tempfile.mkdtemp()) / "ds"
+        run_render(RenderJob(out=data, n=48, backend="mitsuba", quality="draft"), progress=False)
+    config = args.config or ("paper" if torch.cuda.is_available() else "smoke")
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # as in a loader process
+    single, multi = loader_rate(data, args.workers, args.samples)
+    print(f"loader, 1 process (paper augmentations, 256/64): {single:7.1f} samples/s per process")
+    print(f"loader, {args.workers} worker processes:              {multi:7.1f} samples/s")
+    torch.set_num_threads(threads)
+    sec, bs, dev = step_time(data, config, args.steps)
+    print(f"train step ({config} config, batch {bs}, {dev}): {1000 * sec:.1f} ms ({bs / sec:.1f} samples/s)")
+
+
+if __name__ == "__main__":
+    main()

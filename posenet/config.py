@@ -1,0 +1,211 @@
+"""Training configuration: dataclasses with the paper's values, the built-in `smoke` preset, file loading.
+
+A config file (YAML or TOML) may name a base `preset` (paper or smoke) and override any field:
+
+    preset: smoke
+    variant: gap-gdrnet
+    model: {head_channels: 32}
+    data: {workers: 2, bg_prob: 0.0}
+    optim: {epochs: 20, lr: 1.0e-3}
+
+The variant fixes the modules (ggca, mecs, pgsa) and the backbone family; `model` overrides the other
+ModelConfig fields of the preset. `to_dict()` is what is saved as OUT/config.yaml; it reloads to the
+same configuration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from posenet.errors import PosenetError
+from posenet.models import VARIANTS, ModelConfig
+
+PRESETS = ("paper", "smoke")
+VARIANT_FIELDS = ("ggca", "mecs", "pgsa")  # set by the variant; the backbone may change within its family
+
+
+@dataclass
+class DataConfig:
+    """Reading, cropping and augmenting samples (probabilities are per sample)."""
+
+    obj_id: int = 1
+    pad_scale: float = 1.5  # DZI: crop side = max(w, h) * pad_scale
+    min_visib_fract: float = 0.3  # training skips instances less visible than this
+    num_pm_points: int = 3000
+    dzi_prob: float = 1.0  # scale/shift perturbation of the crop
+    dzi_scale: float = 0.25
+    dzi_shift: float = 0.25
+    color_prob: float = 0.8  # brightness/contrast
+    brightness: tuple[float, float] = (0.5, 1.5)
+    contrast: tuple[float, float] = (0.5, 1.5)
+    bg_prob: float = 0.5  # background replacement
+    bg_from_dataset: float = 0.5  # share of replacements taken from other dataset images (else noise)
+    bg_pool_size: int = 32  # target-free backgrounds each loader process keeps in memory
+    workers: int = 4  # DataLoader worker processes per training process
+
+
+@dataclass
+class LossConfig:
+    """Loss weights (paper eq. 7-8) and the mask loss type ('bce' on logits or 'l1' on probabilities)."""
+
+    coord: float = 1.0
+    mask: float = 1.0
+    region: float = 1.1
+    pm: float = 1.0
+    cent: float = 1.0
+    z: float = 1.0
+    mask_type: str = "bce"
+
+
+@dataclass
+class OptimConfig:
+    """Ranger (RAdam + Lookahead) and the per-iteration warmup + flat + cosine schedule."""
+
+    lr: float = 2e-4
+    weight_decay: float = 0.05
+    batch_size: int = 24  # global: split evenly over DDP processes
+    epochs: int = 300
+    warmup_iters: int = 1000
+    warmup_factor: float = 0.001
+    anneal_point: float = 0.72  # fraction of all iterations spent before the cosine decay starts
+    seed: int = 0
+    log_every: int = 10  # TensorBoard scalar interval (steps)
+    ckpt_every: int = 1  # epochs between rewrites of OUT/last.pt (it is always written when a run stops)
+
+
+@dataclass
+class TrainConfig:
+    preset: str = "paper"
+    variant: str = "gdrnet"
+    model: dict[str, Any] = field(default_factory=dict)
+    data: DataConfig = field(default_factory=DataConfig)
+    loss: LossConfig = field(default_factory=LossConfig)
+    optim: OptimConfig = field(default_factory=OptimConfig)
+
+    def model_config(self) -> ModelConfig:
+        """The network's configuration: the preset of the variant with `model` overrides."""
+        base = ModelConfig.smoke if self.preset == "smoke" else ModelConfig.paper
+        try:
+            return base(
+                self.variant, **{k: tuple(v) if isinstance(v, list) else v for k, v in self.model.items()}
+            )
+        except TypeError as exc:
+            raise PosenetError(f"bad model config: {exc}") from exc
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON/YAML-able; `resolved_model` (every ModelConfig field) is informational, ignored on load."""
+        d = {k: _plain(v) for k, v in dataclasses.asdict(self).items()}
+        d["resolved_model"] = self.model_config().to_dict()
+        return d
+
+    def to_yaml(self) -> str:
+        return yaml.safe_dump(self.to_dict(), sort_keys=False)
+
+
+def _plain(value: Any) -> Any:
+    """Tuples as lists, recursively: what YAML and JSON write and read back."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return list(value) if isinstance(value, tuple) else value
+
+
+def smoke_config() -> TrainConfig:
+    """Reduced CPU preset: ModelConfig.smoke, small batches, short warmup, few loader processes."""
+    return TrainConfig(
+        preset="smoke",
+        data=DataConfig(workers=2, bg_pool_size=8),
+        optim=OptimConfig(batch_size=8, epochs=20, warmup_iters=20, lr=1e-3, log_every=1),
+    )
+
+
+def load_config(name_or_path: str, variant: str | None = None, epochs: int | None = None) -> TrainConfig:
+    """A preset name or a YAML/TOML file, then the command-line overrides; validated."""
+    raw = {"preset": name_or_path} if name_or_path in PRESETS else _read_file(Path(name_or_path))
+    cfg = config_from_dict(raw)
+    if variant is not None:
+        cfg.variant = variant
+    if epochs is not None:
+        cfg.optim.epochs = epochs
+    _validate(cfg)
+    return cfg
+
+
+def config_from_dict(raw: dict[str, Any]) -> TrainConfig:
+    """A TrainConfig from a file's (or a checkpoint's) dict: the named preset, then every given field."""
+    raw = dict(raw)
+    preset = raw.pop("preset", "paper")
+    if preset not in PRESETS:
+        raise PosenetError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+    cfg = smoke_config() if preset == "smoke" else TrainConfig()
+    for key, value in raw.items():
+        if key in ("data", "loss", "optim"):
+            setattr(cfg, key, _override(getattr(cfg, key), value, key))
+        elif key == "model":
+            if not isinstance(value, dict) or set(value) & set(VARIANT_FIELDS):
+                fixed = ", ".join(VARIANT_FIELDS)
+                raise PosenetError(f"config 'model' must be a table without {fixed} (set 'variant')")
+            cfg.model = dict(value)
+        elif key == "variant":
+            cfg.variant = value
+        elif key != "resolved_model":
+            raise PosenetError(f"unknown config key {key!r}")
+    _validate(cfg)
+    return cfg
+
+
+def _read_file(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise PosenetError(f"config {str(path)!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
+    try:
+        text = path.read_text()
+        data = yaml.safe_load(text) if path.suffix.lower() in (".yaml", ".yml") else tomllib.loads(text)
+    except (yaml.YAMLError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise PosenetError(f"cannot parse config {path}: {str(exc).splitlines()[0]}") from exc
+    if not isinstance(data, dict):
+        raise PosenetError(f"config {path} must be a table of sections")
+    return data
+
+
+def _override(section: Any, values: Any, name: str) -> Any:
+    if not isinstance(values, dict):
+        raise PosenetError(f"config '{name}' must be a table")
+    fields = {f.name: f for f in dataclasses.fields(section)}
+    out = {}
+    for key, value in values.items():
+        if key not in fields:
+            raise PosenetError(f"unknown config key '{name}.{key}'")
+        default = getattr(section, key)
+        if isinstance(default, tuple):
+            if not isinstance(value, (list, tuple)) or len(value) != len(default):
+                raise PosenetError(f"config '{name}.{key}' must be a list of {len(default)} numbers")
+            value = tuple(float(v) for v in value)
+        elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if type(value) is not type(default):
+            raise PosenetError(f"config '{name}.{key}' must be {type(default).__name__}, got {value!r}")
+        out[key] = value
+    return dataclasses.replace(section, **out)
+
+
+def _validate(cfg: TrainConfig) -> None:
+    if cfg.variant not in VARIANTS:
+        raise PosenetError(f"unknown variant {cfg.variant!r}; choose one of {', '.join(VARIANTS)}")
+    cfg.model_config()
+    d, o = cfg.data, cfg.optim
+    for name in ("dzi_prob", "color_prob", "bg_prob", "bg_from_dataset", "min_visib_fract"):
+        if not 0.0 <= getattr(d, name) <= 1.0:
+            raise PosenetError(f"data.{name} must lie in [0, 1], got {getattr(d, name)}")
+    if cfg.loss.mask_type not in ("bce", "l1"):
+        raise PosenetError(f"loss.mask_type must be 'bce' or 'l1', got {cfg.loss.mask_type!r}")
+    if min(o.batch_size, o.epochs, o.log_every, o.ckpt_every) < 1 or o.lr <= 0 or d.workers < 0:
+        raise PosenetError(
+            "optim.batch_size, epochs, log_every, ckpt_every must be >= 1, optim.lr > 0, data.workers >= 0"
+        )
+    if not 0.0 <= o.anneal_point <= 1.0:
+        raise PosenetError(f"optim.anneal_point must lie in [0, 1], got {o.anneal_point}")

@@ -1,0 +1,55 @@
+"""The paper's training augmentations on a cropped RoI: brightness/contrast and background replacement.
+
+(Scale perturbation is DZI jitter, see crop.py.) Backgrounds come from the dataset's own images with the
+target painted out, or are procedural noise: nothing is downloaded.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def brightness_contrast(
+    img: np.ndarray, rng: np.random.Generator, brightness: tuple[float, float], contrast: tuple[float, float]
+) -> np.ndarray:
+    """float32 RGB in [0, 1]: contrast about the mean grey level, then a brightness gain; clipped."""
+    c, b = rng.uniform(*contrast), rng.uniform(*brightness)
+    mean = img.mean()
+    return np.clip(((img - mean) * c + mean) * b, 0.0, 1.0)
+
+
+def noise_background(res: int, rng: np.random.Generator) -> np.ndarray:
+    """A res x res float32 RGB background: smooth colour noise, fine grain and a sprinkle of stars."""
+    cells = int(rng.integers(2, 17))
+    coarse = rng.uniform(0.0, rng.uniform(0.1, 1.0), size=(cells, cells, 3)).astype(np.float32)
+    img = cv2.resize(coarse, (res, res), interpolation=cv2.INTER_CUBIC)
+    img += rng.normal(0.0, rng.uniform(0.0, 0.05), size=img.shape).astype(np.float32)
+    stars = rng.integers(0, res, size=(int(rng.integers(0, res // 4 + 1)), 2))
+    img[stars[:, 1], stars[:, 0]] = rng.uniform(0.5, 1.0, size=(len(stars), 1))
+    return np.clip(img, 0.0, 1.0)
+
+
+def paint_out(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """uint8 RGB with the (dilated) mask region inpainted from its surroundings: a target-free background."""
+    grown = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8))
+    return cv2.inpaint(rgb, grown, 3, cv2.INPAINT_TELEA)
+
+
+def random_view(bg: np.ndarray, res: int, rng: np.random.Generator) -> np.ndarray:
+    """A random square window of `bg` (uint8 RGB), flipped at random, resized to res x res float32 [0, 1]."""
+    h, w = bg.shape[:2]
+    side = int(rng.integers(min(h, w) // 3, min(h, w) + 1))
+    y, x = int(rng.integers(0, h - side + 1)), int(rng.integers(0, w - side + 1))
+    win = bg[y : y + side, x : x + side]
+    if rng.random() < 0.5:
+        win = win[:, ::-1]
+    return (
+        cv2.resize(np.ascontiguousarray(win), (res, res), interpolation=cv2.INTER_LINEAR).astype(np.float32)
+        / 255
+    )
+
+
+def replace_background(img: np.ndarray, keep: np.ndarray, bg: np.ndarray) -> np.ndarray:
+    """Pixels where `keep` is 0 replaced by `bg` (all float32 RGB, same size)."""
+    return np.where(keep[..., None] > 0, img, bg)

@@ -1,0 +1,38 @@
+"""Pixel readers for one instance: RGB, masks and the xyz map (contract: docs/dataset.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import OpenEXR
+
+from posenet.errors import PosenetError
+
+
+def read_rgb(path: Path) -> np.ndarray:
+    """H x W x 3 uint8, RGB order."""
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is None:
+        raise PosenetError(f"cannot read image {path}")
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+def read_mask(path: Path) -> np.ndarray:
+    """H x W uint8 in {0, 1}."""
+    m = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if m is None:
+        raise PosenetError(f"cannot read mask {path}")
+    return (m > 127).astype(np.uint8)
+
+
+def read_xyz(path: Path) -> np.ndarray:
+    """The stored xyz crop (h x w x 3 float32, metres); it covers the instance's `xyz_box` of the image."""
+    if not path.is_file():
+        raise PosenetError(f"missing xyz map {path} (the dataset must ship xyz maps, see docs/dataset.md)")
+    try:
+        channels = OpenEXR.File(str(path), separate_channels=True).channels()
+        return np.stack([channels[c].pixels for c in "XYZ"], axis=-1).astype(np.float32)
+    except (KeyError, RuntimeError, OSError) as exc:
+        raise PosenetError(f"cannot read xyz map {path} (needs channels X, Y, Z): {exc}") from exc

@@ -1,0 +1,235 @@
+"""Training: Ranger (RAdam + Lookahead), warmup + flat + cosine per iteration, checkpoints, resume, DDP.
+
+Run as `posenet train` (one process) or under `torchrun --nproc-per-node N` (DDP: NCCL on GPUs, gloo on
+CPU). The batch size in the config is global and split over the processes. Every step appends one line
+to OUT/train_log.jsonl; OUT/last.pt is rewritten after each epoch and when --max-steps stops the run.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import torch
+import torch.distributed as dist
+from timm.optim import create_optimizer_v2
+from torch.nn.parallel import DistributedDataParallel
+from torch.utils.data import DataLoader
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
+
+from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
+from posenet.config import OptimConfig, TrainConfig
+from posenet.data import EpochSampler, open_split
+from posenet.errors import PosenetError
+from posenet.losses import LOSS_TERMS, pose_losses
+from posenet.models import build_model
+from scgen.atomic import atomic_write_text
+
+LOG_FILE = "train_log.jsonl"
+LAST = "last.pt"
+RANGER_BETAS = (0.95, 0.999)  # GDRNPP's Ranger; timm's Lookahead defaults (alpha 0.5, k 6) match it too
+
+
+def lr_factor(it: int, total: int, o: OptimConfig) -> float:
+    """GDRNPP's flat_and_anneal: linear warmup from warmup_factor, flat, cosine to 0 from anneal_point."""
+    warm = 1.0
+    if it < o.warmup_iters:
+        alpha = it / o.warmup_iters
+        warm = o.warmup_factor * (1 - alpha) + alpha
+    start = o.anneal_point * total
+    if it < start or total <= start:
+        return warm
+    return warm * 0.5 * (1 + math.cos(math.pi * (it - start) / (total - start)))
+
+
+def worker_init(_: int) -> None:
+    """One thread per loader process: the processes themselves are the parallelism."""
+    torch.set_num_threads(1)
+    cv2.setNumThreads(1)
+
+
+def make_optimizer(model: torch.nn.Module, o: OptimConfig, total_iters: int):
+    """Ranger (timm's Lookahead over RAdam) and the per-iteration warmup + flat + cosine schedule."""
+    optimizer = create_optimizer_v2(
+        model,
+        opt="lookahead_radam",
+        lr=o.lr,
+        weight_decay=o.weight_decay,
+        betas=RANGER_BETAS,
+        eps=1e-5,
+        decoupled_weight_decay=True,  # Ranger decays weights directly (p -= lr * wd * p)
+    )
+    return optimizer, torch.optim.lr_scheduler.LambdaLR(optimizer, lambda it: lr_factor(it, total_iters, o))
+
+
+def _init_distributed() -> tuple[int, int, torch.device]:
+    """(rank, world size, device) from torchrun's environment; a single process without it."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    cuda = torch.cuda.is_available()
+    if world > 1 and not dist.is_initialized():
+        dist.init_process_group("nccl" if cuda else "gloo")
+    rank = dist.get_rank() if world > 1 else 0
+    if cuda:
+        local = int(os.environ.get("LOCAL_RANK", "0"))
+        torch.cuda.set_device(local)
+        return rank, world, torch.device("cuda", local)
+    return rank, world, torch.device("cpu")
+
+
+def _to(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch.Tensor]:
+    return {k: v.to(device, non_blocking=True) for k, v in batch.items()}
+
+
+class _Log:
+    """Rank 0's step log (JSONL), TensorBoard scalars and progress bar."""
+
+    def __init__(self, out: Path, step: int, total: int, every: int) -> None:
+        path = out / LOG_FILE
+        kept = (
+            [ln for ln in path.read_text().splitlines() if json.loads(ln)["step"] <= step]
+            if path.exists()
+            else []
+        )
+        atomic_write_text(path, "".join(ln + "\n" for ln in kept))
+        self.file = path.open("a")
+        self.tb = SummaryWriter(str(out / "tb"))
+        self.bar = tqdm(total=total, initial=step, desc="train", unit="step", dynamic_ncols=True)
+        self.every = every
+
+    def step(self, row: dict[str, Any]) -> None:
+        self.file.write(json.dumps(row) + "\n")
+        self.file.flush()
+        self.bar.update(1)
+        self.bar.set_postfix(loss=f"{row['loss']:.4f}", epoch=row["epoch"])
+        if row["step"] % self.every == 0:
+            for key, value in row.items():
+                if key not in ("step", "epoch"):
+                    self.tb.add_scalar(
+                        key if key in ("lr", "loss", "step_s") else f"loss/{key}", value, row["step"]
+                    )
+
+    def close(self) -> None:
+        self.file.close()
+        self.tb.close()
+        self.bar.close()
+
+
+def _step(model: torch.nn.Module, optimizer, batch: dict[str, torch.Tensor], pm_points, cfg: TrainConfig):
+    """One optimisation step; returns the detached (total, *terms) losses."""
+    out = model(batch["roi_img"], batch["roi_coord2d"])
+    loss, terms = pose_losses(out, batch, pm_points, cfg.loss)
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    optimizer.step()
+    return torch.stack([loss.detach(), *(terms[k].detach() for k in LOSS_TERMS)])
+
+
+def train(
+    data: Path, out: Path, cfg: TrainConfig, resume: bool = False, max_steps: int | None = None
+) -> Path:
+    """Train on `data`'s train split into `out`; returns the path of the last checkpoint."""
+    rank, world, device = _init_distributed()
+    try:
+        return _train(data, out, cfg, resume, max_steps, rank, world, device)
+    finally:
+        if world > 1:
+            dist.destroy_process_group()
+
+
+def _train(
+    data: Path,
+    out: Path,
+    cfg: TrainConfig,
+    resume: bool,
+    max_steps: int | None,
+    rank: int,
+    world: int,
+    device: torch.device,
+) -> Path:
+    o = cfg.optim
+    if o.batch_size % world:
+        raise PosenetError(f"batch size {o.batch_size} does not split over {world} processes")
+    if not resume and (out / LAST).exists():
+        raise PosenetError(f"{out} already holds a run ({LAST}); pass --resume or choose another --out")
+    model_cfg = cfg.model_config()
+    dataset = open_split(data, "train", cfg.data, model_cfg, train=True, seed=o.seed)
+    sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
+    if sampler.steps_per_epoch == 0:
+        raise PosenetError(f"{len(dataset)} training samples are fewer than one batch of {o.batch_size}")
+    total = o.epochs * sampler.steps_per_epoch
+
+    torch.manual_seed(o.seed)
+    model = build_model(cfg.variant, model_cfg).to(device)
+    optimizer, scheduler = make_optimizer(model, o, total)
+    step = 0
+    if resume:
+        state = load_checkpoint(out / LAST)
+        check_model_config(state, model.config_dict(), out / LAST)
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        scheduler.load_state_dict(state["scheduler"])
+        step = int(state["step"])
+    ddp = DistributedDataParallel(model) if world > 1 else model
+    pm_points = torch.from_numpy(dataset.obj.pm_points / dataset.obj.extent.max()).float().to(device)
+    loader = DataLoader(
+        dataset,
+        batch_size=o.batch_size // world,
+        sampler=sampler,
+        num_workers=cfg.data.workers,
+        persistent_workers=cfg.data.workers > 0,
+        pin_memory=device.type == "cuda",
+        worker_init_fn=worker_init,
+    )
+
+    def checkpoint() -> dict[str, Any]:
+        return {
+            "model": model.state_dict(),
+            "optimizer": optimizer.state_dict(),
+            "scheduler": scheduler.state_dict(),
+            "step": step,
+            "model_config": model.config_dict(),
+            "config": cfg.to_dict(),
+            "world_size": world,
+            "object": {"extent": dataset.obj.extent.tolist(), "diameter": dataset.obj.diameter},
+        }
+
+    stop = min(total, max_steps) if max_steps is not None else total
+    log = None
+    if rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out / "config.yaml", cfg.to_yaml())
+        log = _Log(out, step, stop, o.log_every)
+    model.train()
+    try:
+        while step < stop:
+            epoch, skip = divmod(step, sampler.steps_per_epoch)
+            sampler.set_epoch(epoch, skip)
+            tic = time.perf_counter()
+            for batch in loader:
+                values = _step(ddp, optimizer, _to(batch, device), pm_points, cfg)
+                lr = optimizer.param_groups[0]["lr"]
+                scheduler.step()
+                step += 1
+                if world > 1:
+                    dist.all_reduce(values)
+                    values /= world
+                if log is not None:
+                    toc = time.perf_counter()
+                    losses = dict(zip(("loss", *LOSS_TERMS), values.tolist(), strict=True))
+                    row = {"step": step, "epoch": epoch, "lr": lr, "step_s": toc - tic, **losses}
+                    log.step(row)
+                    tic = toc
+                if step >= stop:
+                    break
+            if rank == 0 and (step >= stop or (epoch + 1) % o.ckpt_every == 0):
+                save_checkpoint(out / LAST, checkpoint())
+    finally:
+        if log is not None:
+            log.close()
+    return out / LAST

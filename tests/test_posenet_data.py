@@ -1,0 +1,156 @@
+"""The data pipeline on a real rendered dataset: items, targets, augmentation, sampler, boxes."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+from posenet_helpers import posenet_dataset
+
+from posenet.cli import main
+from posenet.config import smoke_config
+from posenet.data import EpochSampler, open_split
+from posenet.data.boxes import read_boxes
+from posenet.data.crop import box_center
+from posenet.data.dataset import region_labels
+from posenet.data.object_model import farthest_point_sampling
+from posenet.errors import PosenetError
+
+
+@pytest.fixture(scope="module")
+def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return posenet_dataset(tmp_path_factory)
+
+
+def no_aug(**changes):
+    cfg = smoke_config()
+    return dataclasses.replace(
+        cfg.data, color_prob=0.0, bg_prob=0.0, dzi_prob=0.0, **changes
+    ), cfg.model_config()
+
+
+def test_training_item_shapes_and_ranges(dataset_dir: Path) -> None:
+    cfg = smoke_config()
+    mc = cfg.model_config()
+    ds = open_split(dataset_dir, "train", cfg.data, mc, train=True)
+    assert all(i.visib_fract > cfg.data.min_visib_fract for i in ds.instances)
+    R, r = mc.input_res, mc.output_res
+    item = ds[(0, 0)]
+    shapes = {k: tuple(v.shape) for k, v in item.items()}
+    assert shapes["roi_img"] == (3, R, R) and shapes["roi_coord2d"] == (2, r, r)
+    assert shapes["roi_xyz"] == (3, r, r) and shapes["roi_mask_visib"] == shapes["roi_mask_full"] == (1, r, r)
+    assert shapes["roi_region"] == (r, r) and shapes["site"] == (3,)
+    assert float(item["roi_img"].min()) >= 0.0 and float(item["roi_img"].max()) <= 1.0
+    vis = item["roi_mask_visib"][0] > 0
+    assert vis.any()
+    assert bool((item["roi_mask_full"][0][vis] > 0).all()), "visible must lie inside full"
+    xyz = item["roi_xyz"].permute(1, 2, 0)[vis]
+    assert float(xyz.min()) >= -1e-3 and float(xyz.max()) <= 1 + 1e-3
+    assert bool((item["roi_region"][vis] > 0).all()) and bool((item["roi_region"][~vis] == 0).all())
+    assert int(item["roi_region"].max()) <= mc.num_regions
+
+
+def test_region_labels_are_nearest_fps_centres(dataset_dir: Path) -> None:
+    cfg, mc = no_aug()
+    ds = open_split(dataset_dir, "train", cfg, mc, train=True)
+    centres = ds.obj.fps_points
+    assert centres.shape == (mc.num_regions, 3)
+    far = np.linalg.norm(ds.obj.vertices - ds.obj.vertices.mean(0), axis=1).max()
+    assert np.isclose(np.linalg.norm(centres[0] - ds.obj.vertices.mean(0)), far)
+    pts = np.array([[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]])
+    labels = region_labels(pts, np.array([[1, 0]]), np.array([[5.0, 5, 5], [0.1, 0, 0]]))
+    assert labels.tolist() == [[2, 0]]
+    line = np.linspace(0, 1, 11)[:, None] * np.array([[1.0, 0, 0]])
+    assert np.allclose(sorted(farthest_point_sampling(line, 3)[:, 0]), [0.0, 0.5, 1.0])
+
+
+def test_augmentation_is_a_function_of_seed_epoch_and_index(dataset_dir: Path) -> None:
+    cfg = dataclasses.replace(smoke_config().data, color_prob=1.0, bg_prob=1.0, dzi_prob=1.0)
+    mc = smoke_config().model_config()
+    ds = open_split(dataset_dir, "train", cfg, mc, train=True)
+    a, b, c = ds[(2, 1)], ds[(2, 1)], ds[(3, 1)]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert not torch.equal(a["roi_img"], c["roi_img"])
+    assert not torch.equal(a["crop_center"], c["crop_center"])
+
+
+def test_background_replacement_keeps_the_target(dataset_dir: Path) -> None:
+    cfg, mc = no_aug()
+    plain = open_split(dataset_dir, "train", cfg, mc, train=True)
+    for from_dataset in (0.0, 1.0):
+        swapped = open_split(
+            dataset_dir,
+            "train",
+            dataclasses.replace(cfg, bg_prob=1.0, bg_from_dataset=from_dataset),
+            mc,
+            True,
+        )
+        x, y = plain[(0, 2)], swapped[(0, 2)]
+        full = torch.nn.functional.interpolate(x["roi_mask_full"][None], size=mc.input_res, mode="nearest")[
+            0, 0
+        ]
+        inside = full > 0
+        # inside the (nearest-upsampled) full mask most pixels stay; outside, the background changed
+        assert (x["roi_img"][:, inside] == y["roi_img"][:, inside]).float().mean() > 0.8
+        assert (x["roi_img"][:, ~inside] != y["roi_img"][:, ~inside]).float().mean() > 0.5
+
+
+def test_evaluation_items_have_no_targets_and_no_jitter(dataset_dir: Path) -> None:
+    cfg = smoke_config()
+    ds = open_split(dataset_dir, "test", cfg.data, cfg.model_config(), train=False)
+    inst = ds.instances[0]
+    item = ds[0]
+    assert "roi_xyz" not in item and "site" not in item
+    assert np.allclose(item["crop_center"].numpy(), box_center(inst.bbox_obj), atol=1e-4)
+    assert torch.equal(ds[0]["roi_img"], item["roi_img"])
+
+
+def test_sampler_shards_are_disjoint_deterministic_and_resumable() -> None:
+    a, b = EpochSampler(50, 4, world=2, rank=0, seed=1), EpochSampler(50, 4, world=2, rank=1, seed=1)
+    assert a.steps_per_epoch == 6 and len(a) == 24
+    ia, ib = [i for _, i in a], [i for _, i in b]
+    assert not set(ia) & set(ib) and len(set(ia) | set(ib)) == 48
+    assert ia == [i for _, i in EpochSampler(50, 4, world=2, rank=0, seed=1)]
+    a.set_epoch(1)
+    epoch1 = list(a)
+    assert epoch1[0][0] == 1 and [i for _, i in epoch1] != ia
+    a.set_epoch(1, skip_batches=2)
+    assert list(a) == epoch1[8:] and len(a) == 16
+
+
+def test_boxes_command_writes_bop_detections_that_evaluation_uses(dataset_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "boxes.json"
+    res = CliRunner().invoke(main, ["boxes", "--data", str(dataset_dir), "--out", str(out), "--noise", "0.1"])
+    assert res.exit_code == 0, res.output
+    entries = json.loads(out.read_text())
+    assert {"scene_id", "image_id", "category_id", "bbox", "score", "time"} <= set(entries[0])
+    boxes = read_boxes(out, obj_id=1)
+    cfg = smoke_config()
+    ds = open_split(dataset_dir, "test", cfg.data, cfg.model_config(), train=False, boxes_file=out)
+    inst = ds.instances[0]
+    assert np.allclose(ds[0]["crop_center"].numpy(), box_center(boxes[inst.key]), atol=1e-4)
+    assert not np.allclose(boxes[inst.key], inst.bbox_obj)  # noise moved it
+
+
+def test_bad_datasets_are_refused(dataset_dir: Path, tmp_path: Path) -> None:
+    cfg = smoke_config()
+    mc = cfg.model_config()
+    with pytest.raises(PosenetError, match="not a dataset"):
+        open_split(tmp_path, "train", cfg.data, mc, train=True)
+    with pytest.raises(PosenetError, match="no split 'nope'"):
+        open_split(dataset_dir, "nope", cfg.data, mc, train=True)
+    broken = tmp_path / "no_xyz"
+    shutil.copytree(dataset_dir, broken)
+    shutil.rmtree(next(broken.glob("train/*/xyz")))
+    with pytest.raises(PosenetError, match="missing xyz maps"):
+        open_split(broken, "train", cfg.data, mc, train=True)
+    missing = tmp_path / "boxes.json"
+    missing.write_text("[]")
+    with pytest.raises(PosenetError, match="no box for"):
+        open_split(dataset_dir, "test", cfg.data, mc, train=False, boxes_file=missing)

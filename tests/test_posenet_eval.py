@@ -1,0 +1,105 @@
+"""`posenet eval` end to end on a briefly trained checkpoint: summary keys, predictions, by-factor table."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from posenet_helpers import posenet_dataset
+
+from posenet.cli import main
+from posenet.evaluate import format_table
+from scgen.cli import main as scgen_main
+
+TINY = """\
+preset: smoke
+model: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, fc_dims: [64, 32]}
+data: {workers: 0}
+optim: {batch_size: 4, epochs: 1}
+"""
+
+
+@pytest.fixture(scope="module")
+def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return posenet_dataset(tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def checkpoint(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("eval_run")
+    (root / "tiny.yaml").write_text(TINY)
+    args = [
+        "train",
+        "--data",
+        dataset_dir,
+        "--out",
+        root / "run",
+        "--config",
+        root / "tiny.yaml",
+        "--max-steps",
+        2,
+    ]
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    assert res.exit_code == 0, res.output
+    return root / "run" / "last.pt"
+
+
+def test_eval_writes_summary_and_predictions(dataset_dir: Path, checkpoint: Path, tmp_path: Path) -> None:
+    boxes = tmp_path / "boxes.json"
+    assert CliRunner().invoke(main, ["boxes", "--data", str(dataset_dir), "--out", str(boxes)]).exit_code == 0
+    out = tmp_path / "test.json"
+    args = [
+        "eval",
+        "--data",
+        dataset_dir,
+        "--ckpt",
+        checkpoint,
+        "--boxes",
+        boxes,
+        "--json",
+        out,
+        "--workers",
+        0,
+    ]
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    assert res.exit_code == 0, res.output
+    assert "ADD@0.02m (%)" in res.output and "latency, batch 1 (ms)" in res.output
+    summary = json.loads(out.read_text())
+    for key in ("re_deg", "te_m", "add_0.02m", "add_0.1d", "adds_0.1d", "esa", "latency_ms"):
+        assert isinstance(summary[key], float), key
+    for key in ("add_0.02m", "add_0.1d", "adds_0.1d"):
+        assert 0.0 <= summary[key] <= 1.0
+    assert summary["variant"] == "gdrnet" and summary["split"] == "test"
+    rows = [json.loads(line) for line in out.with_suffix(".predictions.jsonl").read_text().splitlines()]
+    assert len(rows) == summary["n"] == len(json.loads(boxes.read_text()))
+    assert {"scene_id", "im_id", "R", "t", "re_deg", "te_m", "add_m", "adds_m", "esa"} <= set(rows[0])
+    assert len(rows[0]["R"]) == 9 and len(rows[0]["t"]) == 3
+
+
+def test_by_factor_table_averages_checkpoints_of_one_variant(
+    dataset_dir: Path, checkpoint: Path, tmp_path: Path
+) -> None:
+    groups = tmp_path / "groups.json"
+    args = ["stats", str(dataset_dir), "--sample-groups", "3", "--groups-out", str(groups)]
+    res = CliRunner().invoke(scgen_main, args)
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "factors.json"
+    args = ["eval", "--data", dataset_dir, "--ckpt", checkpoint, "--ckpt", checkpoint, "--by-factor", groups]
+    res = CliRunner().invoke(main, [str(a) for a in [*args, "--json", out, "--workers", 0]])
+    assert res.exit_code == 0, res.output
+    table = json.loads(out.read_text())
+    assert table["columns"] == ["gdrnet"] and table["runs"] == {"gdrnet": 2}
+    assert set(table["groups"]) == set(json.loads(groups.read_text())["groups"])
+    assert "illumination/" in res.output
+    res = CliRunner().invoke(
+        main, [str(a) for a in ["eval", "--data", dataset_dir, "--ckpt", checkpoint, "--ckpt", checkpoint]]
+    )
+    assert res.exit_code == 1 and "only compared with --by-factor" in res.output
+
+
+def test_format_table_aligns_columns() -> None:
+    text = format_table(["metric", "value"], [["a", "1.0"], ["longer name", "22.50"]])
+    lines = text.splitlines()
+    assert len({len(line) for line in lines}) == 1 and lines[1].startswith("---")

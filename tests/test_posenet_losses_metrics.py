@@ -1,0 +1,143 @@
+"""Loss terms and pose metrics on hand-made tensors with known answers."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from posenet.config import LossConfig
+from posenet.geometry import ego_to_allo, mat_to_rot6d, site_encode
+from posenet.losses import coord_loss, mask_loss, pm_loss, pose_losses, region_loss
+from posenet.metrics import (
+    ESA_THETA_Q_DEG,
+    add_error,
+    adds_error,
+    esa_score,
+    rotation_error_deg,
+    sample_errors,
+    summarise,
+)
+
+
+def rot_z(deg: float) -> torch.Tensor:
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    return torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
+
+
+def perfect_batch(b: int = 2, r: int = 8, regions: int = 4) -> tuple[dict, dict]:
+    """A batch of targets and the network output that reproduces them exactly."""
+    g = torch.Generator().manual_seed(0)
+    visible = (torch.rand(b, 1, r, r, generator=g) > 0.5).float()
+    labels = torch.randint(1, regions + 1, (b, r, r), generator=g) * visible[:, 0].long()
+    R = torch.stack([rot_z(30.0), rot_z(-50.0)]).float()
+    t = torch.tensor([[0.1, -0.05, 1.0], [-0.2, 0.1, 2.0]])
+    K = torch.tensor([[500.0, 0, 160], [0, 500.0, 120], [0, 0, 1]]).expand(b, 3, 3)
+    roi = {
+        "K": K,
+        "crop_center": torch.tensor([[200.0, 90.0], [60.0, 150.0]]),
+        "box_wh": torch.full((b, 2), 40.0),
+    }
+    roi["resize_ratio"] = torch.full((b,), r / 60.0)
+    site = site_encode(t, K, roi["crop_center"], roi["box_wh"], roi["resize_ratio"])
+    xyz = torch.rand(b, 3, r, r, generator=g) * visible
+    batch = {
+        **roi,
+        "roi_xyz": xyz,
+        "roi_mask_visib": visible,
+        "roi_region": labels,
+        "R": R,
+        "t": t,
+        "site": site,
+    }
+    out = {
+        "xyz": xyz.clone(),
+        "mask": (visible * 2 - 1) * 50,
+        "region": torch.nn.functional.one_hot(labels, regions + 1).permute(0, 3, 1, 2).float() * 50,
+        "rot6d": mat_to_rot6d(ego_to_allo(R, t)),
+        "site": site.clone(),
+    }
+    return batch, out
+
+
+def test_perfect_prediction_has_zero_loss() -> None:
+    batch, out = perfect_batch()
+    pts = torch.rand(100, 3) - 0.5
+    total, terms = pose_losses(out, batch, pts, LossConfig())
+    assert set(terms) == {"coord", "mask", "region", "pm", "cent", "z"}
+    for name, value in terms.items():
+        assert float(value) < 1e-4, name
+    assert float(total) < 1e-3
+
+
+def test_total_is_the_weighted_sum_with_the_paper_weights() -> None:
+    batch, out = perfect_batch()
+    out = {k: v + 0.1 for k, v in out.items()}
+    cfg = LossConfig()
+    assert (cfg.coord, cfg.mask, cfg.region, cfg.pm, cfg.cent, cfg.z) == (1.0, 1.0, 1.1, 1.0, 1.0, 1.0)
+    total, terms = pose_losses(out, batch, torch.rand(50, 3), cfg)
+    expected = sum(getattr(cfg, k) * v for k, v in terms.items())
+    assert torch.isclose(total, expected)
+    assert all(float(v) > 0 for k, v in terms.items() if k != "region")
+
+
+def test_coord_loss_counts_visible_pixels_only() -> None:
+    target = torch.zeros(1, 3, 2, 2)
+    pred = torch.zeros(1, 3, 2, 2)
+    pred[0, :, 0, 0] = 0.3  # visible: error 3 x 0.3
+    pred[0, :, 1, 1] = 9.0  # not visible: ignored
+    visible = torch.tensor([[[[1.0, 1.0], [0.0, 0.0]]]])
+    assert math.isclose(float(coord_loss(pred, target, visible)), 0.9 / 2, rel_tol=1e-6)
+
+
+def test_mask_loss_kinds() -> None:
+    target = torch.tensor([[[[1.0, 0.0]]]])
+    logits = torch.tensor([[[[0.0, 0.0]]]])
+    assert math.isclose(float(mask_loss(logits, target, "bce")), math.log(2), rel_tol=1e-6)
+    assert math.isclose(float(mask_loss(logits, target, "l1")), 0.5, rel_tol=1e-6)
+
+
+def test_region_loss_is_uniform_cross_entropy_at_zero_logits() -> None:
+    labels = torch.tensor([[[1, 2], [0, 3]]])
+    visible = (labels > 0).float()[:, None]
+    assert math.isclose(
+        float(region_loss(torch.zeros(1, 5, 2, 2), labels, visible)), math.log(5), rel_tol=1e-6
+    )
+
+
+def test_pm_loss_of_a_known_rotation() -> None:
+    pts = torch.tensor([[1.0, 0.0, 0.0]], dtype=torch.float64)
+    # R_pred p = (0, 1, 0), R_gt p = (1, 0, 0): per-point L1 = 2, "3 x mean over xyz" = 2
+    assert math.isclose(float(pm_loss(rot_z(90), torch.eye(3, dtype=torch.float64), pts)), 2.0)
+
+
+def test_pose_errors_of_known_perturbations() -> None:
+    pts = torch.rand(500, 3, dtype=torch.float64) - 0.5
+    R, t = torch.eye(3, dtype=torch.float64)[None], torch.tensor([[0.0, 0.0, 2.0]], dtype=torch.float64)
+    shift = torch.tensor([[0.03, 0.0, 0.04]], dtype=torch.float64)
+    assert math.isclose(float(add_error(R, t + shift, R, t, pts)), 0.05, rel_tol=1e-9)
+    assert math.isclose(float(rotation_error_deg(rot_z(25)[None], R)), 25.0, rel_tol=1e-9)
+    turned = rot_z(10)[None]
+    assert float(adds_error(turned, t, R, t, pts)) <= float(add_error(turned, t, R, t, pts))
+    assert float(adds_error(R, t, R, t, pts)) == pytest.approx(0.0, abs=1e-7)
+
+
+def test_esa_score_terms_and_thresholds() -> None:
+    R, t = torch.eye(3, dtype=torch.float64)[None], torch.tensor([[0.0, 0.0, 2.0]], dtype=torch.float64)
+    # 10 deg and 0.1 m at 2 m: score = rad(10) + 0.05
+    got = esa_score(rot_z(10)[None], t + torch.tensor([[0.1, 0.0, 0.0]], dtype=torch.float64), R, t)
+    assert math.isclose(float(got), math.radians(10) + 0.05, rel_tol=1e-9)
+    tiny = esa_score(rot_z(ESA_THETA_Q_DEG / 2)[None], t + 1e-3, R, t)
+    assert float(tiny) == 0.0
+
+
+def test_summary_keys_and_recalls() -> None:
+    R = torch.eye(3, dtype=torch.float64).expand(4, 3, 3)
+    t = torch.tensor([[0.0, 0.0, 2.0]], dtype=torch.float64).expand(4, 3)
+    offsets = torch.tensor([[0.0, 0, 0], [0.01, 0, 0], [0.019, 0, 0], [0.05, 0, 0]], dtype=torch.float64)
+    errs = sample_errors(R, t + offsets, R, t, torch.rand(100, 3, dtype=torch.float64) - 0.5)
+    s = summarise({k: v.tolist() for k, v in errs.items()}, diameter=0.2)
+    assert {"re_deg", "te_m", "add_0.02m", "add_0.1d", "adds_0.1d", "esa"} <= set(s)
+    assert s["add_0.02m"] == 0.75 and s["add_0.1d"] == 0.75
+    assert math.isclose(s["te_m"], (0.01 + 0.019 + 0.05) / 4)

@@ -1,0 +1,129 @@
+"""Training runs on a real rendered dataset: resume, DDP (gloo, 2 processes), config, and refusals."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+from click.testing import CliRunner
+from posenet_helpers import posenet_dataset
+
+from posenet.cli import main
+from posenet.config import OptimConfig, load_config
+from posenet.train import lr_factor
+
+TINY = """\
+preset: smoke
+model: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, fc_dims: [64, 32]}
+data: {workers: 1, pad_scale: 1.5}
+optim: {batch_size: 4, epochs: 10, warmup_iters: 2, ckpt_every: 100}
+"""
+
+
+@pytest.fixture(scope="module")
+def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return posenet_dataset(tmp_path_factory)
+
+
+@pytest.fixture
+def tiny_config(tmp_path: Path) -> Path:
+    path = tmp_path / "tiny.yaml"
+    path.write_text(TINY)
+    return path
+
+
+def posenet(*args: str) -> tuple[int, str]:
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    return res.exit_code, res.output
+
+
+def losses(run: Path) -> dict[int, float]:
+    return {r["step"]: r["loss"] for r in map(json.loads, (run / "train_log.jsonl").read_text().splitlines())}
+
+
+def test_schedule_warms_up_stays_flat_then_anneals_to_zero() -> None:
+    o = OptimConfig(warmup_iters=10, warmup_factor=0.001, anneal_point=0.72)
+    f = [lr_factor(i, 100, o) for i in range(101)]
+    assert f[0] == pytest.approx(0.001) and f[5] == pytest.approx(0.5005)
+    assert f[10] == f[50] == f[72] == 1.0
+    assert f[86] == pytest.approx(0.5) and f[100] == pytest.approx(0.0, abs=1e-12)
+    assert all(a >= b for a, b in zip(f[72:], f[73:], strict=False))
+
+
+def test_resume_continues_with_the_identical_next_step_loss(
+    dataset_dir: Path, tiny_config: Path, tmp_path: Path
+) -> None:
+    straight, stopped = tmp_path / "straight", tmp_path / "stopped"
+    code, out = posenet(
+        "train", "--data", dataset_dir, "--out", straight, "--config", tiny_config, "--max-steps", 5
+    )
+    assert code == 0, out
+    code, out = posenet(
+        "train", "--data", dataset_dir, "--out", stopped, "--config", tiny_config, "--max-steps", 3
+    )
+    assert code == 0, out
+    assert torch.load(stopped / "last.pt", weights_only=True)["step"] == 3
+    code, out = posenet("train", "--data", dataset_dir, "--out", stopped, "--resume", "--max-steps", 5)
+    assert code == 0, out
+    a, b = losses(straight), losses(stopped)
+    assert sorted(b) == [1, 2, 3, 4, 5]
+    assert b[4] == a[4] and b[5] == a[5]  # bit-identical: same weights, optimizer state and batches
+    saved = yaml.safe_load((stopped / "config.yaml").read_text())
+    assert load_config(str(stopped / "config.yaml")).to_dict() == saved
+    assert (stopped / "tb").is_dir()
+
+
+def test_ddp_with_gloo_on_two_processes(dataset_dir: Path, tiny_config: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ddp"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", "2"]
+    cmd += ["-m", "posenet.cli", "train", "--data", str(dataset_dir), "--out", str(out)]
+    cmd += ["--config", str(tiny_config), "--max-steps", "2"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    state = torch.load(out / "last.pt", weights_only=True)
+    assert state["world_size"] == 2 and state["step"] == 2
+    assert sorted(losses(out)) == [1, 2]
+
+
+def test_refusals_are_one_line_and_write_nothing(
+    dataset_dir: Path, tiny_config: Path, tmp_path: Path
+) -> None:
+    code, out = posenet(
+        "train", "--data", tmp_path / "nothing", "--out", tmp_path / "r0", "--config", tiny_config
+    )
+    assert (
+        code == 1
+        and out.startswith("Error:")
+        and "not a dataset" in out
+        and len(out.strip().splitlines()) == 1
+    )
+    assert not (tmp_path / "r0").exists()
+    code, out = posenet(
+        "train", "--data", dataset_dir, "--out", tmp_path / "r1", "--config", tmp_path / "nope.yaml"
+    )
+    assert code == 1 and "neither a preset" in out
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("optim: {learning_rate: 1.0}\n")
+    code, out = posenet("train", "--data", dataset_dir, "--out", tmp_path / "r1", "--config", bad)
+    assert code == 1 and "unknown config key 'optim.learning_rate'" in out
+    run = tmp_path / "run"
+    code, out = posenet(
+        "train", "--data", dataset_dir, "--out", run, "--config", tiny_config, "--max-steps", 1
+    )
+    assert code == 0, out
+    code, out = posenet(
+        "train", "--data", dataset_dir, "--out", run, "--config", tiny_config, "--max-steps", 1
+    )
+    assert code == 1 and "already holds a run" in out
+    code, out = posenet("train", "--data", dataset_dir, "--out", run, "--resume", "--variant", "gap-gdrnet")
+    assert code == 1 and "from another configuration" in out and len(out.strip().splitlines()) == 1
+    assert losses(run) == {1: losses(run)[1]}
+    code, out = posenet("eval", "--data", dataset_dir, "--ckpt", tiny_config)
+    assert code == 1 and "not a readable checkpoint" in out
