@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import timm
+from timm.layers import LayerNorm2d
 from torch import Tensor, nn
 
 from posenet.errors import PosenetError
@@ -44,6 +45,11 @@ class Backbone(nn.Module):
             out_indices=(-1,),
         )
         self.out_channels: int = self.body.feature_info.channels()[-1]
+        if overlay is None and isinstance(getattr(self.body, "stem_1", None), nn.LayerNorm | LayerNorm2d):
+            # From scratch timm zeroes the ConvNeXt stem bias: a flat patch (black space) then gives equal
+            # channels, LayerNorm divides by sqrt(eps) and the bias gradient explodes. A small random bias
+            # keeps the channels apart; pretrained weights are left untouched.
+            nn.init.normal_(self.body.stem_0.bias, std=0.02)
 
     def forward(self, x: Tensor) -> Tensor:
         return self.body(x)[-1]
