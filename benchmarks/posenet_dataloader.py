@@ -93,7 +93,7 @@ def main() -> None:
         run_render(RenderJob(out=data, n=48, backend="mitsuba", quality="draft"), progress=False)
     config = args.config or ("paper" if torch.cuda.is_available() else "smoke")
     threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # as in a loader process
+    worker_init(0)  # one thread, as in a loader process (and OpenCV's pool stays unused before the fork)
     single, multi = loader_rate(data, args.workers, args.samples)
     print(f"loader, 1 process (paper augmentations, 256/64): {single:7.1f} samples/s per process")
     print(f"loader, {args.workers} worker processes:              {multi:7.1f} samples/s")
