@@ -32,20 +32,27 @@ def loader_rate(data: Path, workers: int, n: int) -> tuple[float, float]:
     cfg = load_config("paper")
     mc = cfg.model_config()
     ds = open_split(data, "train", cfg.data, mc, train=True)
-    for i in range(min(len(ds), 8)):  # build the background pool and warm the file cache
+    for i in range(len(ds)):  # build the background pool (once per loader process) and warm the file cache
         ds[(0, i)]
     tic = time.perf_counter()
     for k in range(n):
         ds[(1 + k // len(ds), k % len(ds))]
     single = n / (time.perf_counter() - tic)
     sampler = EpochSampler(len(ds), 1, seed=0)
-    loader = DataLoader(ds, batch_size=None, sampler=sampler, num_workers=workers, worker_init_fn=worker_init)
+    loader = DataLoader(
+        ds,
+        batch_size=None,
+        sampler=sampler,
+        num_workers=workers,
+        persistent_workers=True,
+        worker_init_fn=worker_init,
+    )
     done, tic = 0, None
     for epoch in range(10**6):
         sampler.set_epoch(epoch)
         for _ in loader:
             done += 1
-            if done == workers * 4:  # start the clock once every process is up and warm
+            if done == 2 * len(ds):  # start the clock once every process is up and has its background pool
                 tic, done = time.perf_counter(), 0
             if tic is not None and done >= n:
                 return single, done / (time.perf_counter() - tic)
