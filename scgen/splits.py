@@ -70,11 +70,15 @@ def viewpoint_cells() -> np.ndarray:
 _CELLS = viewpoint_cells()
 
 
+def view_direction(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Unit direction from the model towards the camera, in the model frame: -R^T t / |t|."""
+    view = -np.asarray(R).T @ np.asarray(t)
+    return view / np.linalg.norm(view)
+
+
 def viewpoint_cell(R: np.ndarray, t: np.ndarray) -> int:
     """Index of the icosahedron face containing the camera's direction seen from the model frame."""
-    view = -np.asarray(R).T @ np.asarray(t)
-    view /= np.linalg.norm(view)
-    return int(np.argmax(_CELLS @ view))
+    return int(np.argmax(_CELLS @ view_direction(R, t)))
 
 
 def combination_key(cell: int, illumination: str, background: str, occluder_config: str) -> str:

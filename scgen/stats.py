@@ -12,7 +12,8 @@ import numpy as np
 
 from scgen.dataset import read_metadata
 from scgen.errors import ScgenError
-from scgen.splits import SPLITS
+from scgen.scenes.geometry import quat_to_matrix
+from scgen.splits import SPLITS, view_direction
 
 FACTOR_GROUPS: dict[str, tuple[str, ...]] = {
     "illumination": ("weak", "normal", "strong"),
@@ -153,10 +154,6 @@ def write_plots(root: str | Path, split: str | None, out_dir: Path) -> list[Path
 
 
 def _view_direction(row: dict[str, str]) -> np.ndarray:
-    """Unit direction from the model towards the camera, in the model frame: -R^T t / |t|."""
-    from scgen.scenes.geometry import quat_to_matrix
-
+    """The metadata row's viewing direction in the model frame (see splits.view_direction)."""
     R = quat_to_matrix(np.array([float(row[k]) for k in ("qw", "qx", "qy", "qz")]))
-    t = np.array([float(row[k]) for k in ("tx", "ty", "tz")])
-    v = -R.T @ t
-    return v / np.linalg.norm(v)
+    return view_direction(R, np.array([float(row[k]) for k in ("tx", "ty", "tz")]))
