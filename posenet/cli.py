@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 from pathlib import Path
 
 import click
@@ -81,7 +82,8 @@ def train(
     ckpt = run_train(
         data, out, load_config(config, variant=variant, epochs=epochs), resume=resume, max_steps=max_steps
     )
-    click.echo(f"checkpoint: {ckpt}")
+    if os.environ.get("RANK", "0") == "0":  # torchrun: one line, not one per process
+        click.echo(f"checkpoint: {ckpt}")
 
 
 @main.command("eval")

@@ -24,7 +24,7 @@ def noise_background(res: int, rng: np.random.Generator) -> np.ndarray:
     cells = int(rng.integers(2, 17))
     coarse = rng.uniform(0.0, rng.uniform(0.1, 1.0), size=(cells, cells, 3)).astype(np.float32)
     img = cv2.resize(coarse, (res, res), interpolation=cv2.INTER_CUBIC)
-    img += rng.normal(0.0, rng.uniform(0.0, 0.05), size=img.shape).astype(np.float32)
+    img += rng.standard_normal(img.shape, dtype=np.float32) * np.float32(rng.uniform(0.0, 0.05))
     stars = rng.integers(0, res, size=(int(rng.integers(0, res // 4 + 1)), 2))
     img[stars[:, 1], stars[:, 0]] = rng.uniform(0.5, 1.0, size=(len(stars), 1))
     return np.clip(img, 0.0, 1.0)

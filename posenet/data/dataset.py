@@ -20,7 +20,7 @@ from posenet.config import DataConfig
 from posenet.data import augment
 from posenet.data.boxes import Box, read_boxes
 from posenet.data.crop import Roi, crop, roi_coord2d, roi_from_box
-from posenet.data.io import read_mask, read_rgb, read_xyz
+from posenet.data.io import read_bgr, read_mask, read_xyz
 from posenet.data.layout import Instance, scan_split
 from posenet.data.object_model import ObjectModel, load_object_model
 from posenet.errors import PosenetError
@@ -107,7 +107,8 @@ class PoseDataset(Dataset):
     def _roi_image(
         self, inst: Instance, roi: Roi, rng: np.random.Generator | None, full: np.ndarray | None
     ) -> torch.Tensor:
-        img = crop(read_rgb(inst.rgb), roi, self.input_res, nearest=False).astype(np.float32) / 255.0
+        bgr = crop(read_bgr(inst.rgb), roi, self.input_res, nearest=False)
+        img = bgr[..., ::-1].astype(np.float32) / 255.0
         if rng is not None and full is not None and rng.random() < self.cfg.bg_prob:
             # keep the full projected target (occluders in front of it stay), replace everything else
             keep = crop(full, roi, self.input_res, nearest=True)
@@ -126,7 +127,7 @@ class PoseDataset(Dataset):
 
     @staticmethod
     def _target_free(inst: Instance) -> np.ndarray:
-        return augment.paint_out(read_rgb(inst.rgb), read_mask(inst.mask))
+        return augment.paint_out(read_bgr(inst.rgb)[..., ::-1].copy(), read_mask(inst.mask))
 
     def _targets(self, inst: Instance, roi: Roi, full_mask: np.ndarray) -> dict[str, torch.Tensor]:
         r = self.output_res

@@ -11,12 +11,12 @@ import OpenEXR
 from posenet.errors import PosenetError
 
 
-def read_rgb(path: Path) -> np.ndarray:
-    """H x W x 3 uint8, RGB order."""
+def read_bgr(path: Path) -> np.ndarray:
+    """H x W x 3 uint8 in OpenCV's BGR order (callers flip to RGB after cropping: less to convert)."""
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise PosenetError(f"cannot read image {path}")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return img
 
 
 def read_mask(path: Path) -> np.ndarray:
