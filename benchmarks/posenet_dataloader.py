@@ -20,48 +20,58 @@ import torch
 from torch.utils.data import DataLoader
 
 from posenet.config import load_config
-from posenet.data import EpochSampler, open_split
+from posenet.data import EpochSampler, PoseDataset, open_split
 from posenet.losses import pose_losses
 from posenet.models import build_model
 from posenet.train import make_optimizer, worker_init
 from scgen.runner import RenderJob, run_render
 
 
-def loader_rate(data: Path, workers: int, n: int) -> tuple[float, float]:
-    """(samples/s in this process, samples/s through a DataLoader with `workers` processes)."""
+def paper_dataset(data: Path) -> PoseDataset:
     cfg = load_config("paper")
-    mc = cfg.model_config()
-    ds = open_split(data, "train", cfg.data, mc, train=True)
-    for i in range(len(ds)):  # build the background pool (once per loader process) and warm the file cache
+    return open_split(data, "train", cfg.data, cfg.model_config(), train=True)
+
+
+def process_rate(ds: PoseDataset, n: int) -> float:
+    """Training samples/s of one process (the work of one loader worker)."""
+    for i in range(len(ds)):  # build the background pool and warm the file cache
         ds[(0, i)]
     tic = time.perf_counter()
     for k in range(n):
         ds[(1 + k // len(ds), k % len(ds))]
-    single = n / (time.perf_counter() - tic)
-    sampler = EpochSampler(len(ds), 1, seed=0)
+    return n / (time.perf_counter() - tic)
+
+
+def loader_rate(ds: PoseDataset, workers: int, n: int, batch: int) -> float:
+    """Samples/s through a training-like DataLoader (batches, `workers` persistent processes), once warm."""
+    sampler = EpochSampler(len(ds), batch, seed=0)
     loader = DataLoader(
         ds,
-        batch_size=None,
+        batch_size=batch,
         sampler=sampler,
         num_workers=workers,
         persistent_workers=True,
         worker_init_fn=worker_init,
     )
-    done, tic = 0, None
+    done, tic, batches = 0, None, 0
     for epoch in range(10**6):
         sampler.set_epoch(epoch)
         for _ in loader:
-            done += 1
-            if done == 2 * len(ds):  # start the clock once every process is up and has its background pool
-                tic, done = time.perf_counter(), 0
-            if tic is not None and done >= n:
-                return single, done / (time.perf_counter() - tic)
+            batches += 1
+            # batches arrive round-robin: after two from each process, every one is up and has built
+            # its background pool (a one-off per process, seconds each, that a long run amortises)
+            if tic is None and batches >= 2 * max(workers, 1):
+                tic = time.perf_counter()
+            elif tic is not None:
+                done += batch
+                if done >= n:
+                    return done / (time.perf_counter() - tic)
     raise AssertionError("unreachable")
 
 
-def step_time(data: Path, config: str, steps: int) -> tuple[float, int, str]:
-    """(seconds per training step, batch size, device) for `config`'s model and batch."""
-    cfg = load_config(config)
+def step_time(data: Path, config: str, variant: str | None, steps: int) -> tuple[float, int, str]:
+    """(seconds per training step, batch size, device) for `config`'s model (or `variant`) and batch."""
+    cfg = load_config(config, variant=variant)
     mc = cfg.model_config()
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     ds = open_split(data, "train", cfg.data, mc, train=True)
@@ -92,7 +102,9 @@ def main() -> None:
     ap.add_argument(
         "--config", default=None, help="Model/batch for the step time [paper on GPU, smoke on CPU]."
     )
+    ap.add_argument("--batch", type=int, default=8, help="Loader batch size (the paper trains with 24).")
     ap.add_argument("--steps", type=int, default=5)
+    ap.add_argument("--variant", action="append", help="Step time of this variant (repeatable).")
     args = ap.parse_args()
     data = args.data
     if data is None:
@@ -101,12 +113,15 @@ def main() -> None:
     config = args.config or ("paper" if torch.cuda.is_available() else "smoke")
     threads = torch.get_num_threads()
     worker_init(0)  # one thread, as in a loader process (and OpenCV's pool stays unused before the fork)
-    single, multi = loader_rate(data, args.workers, args.samples)
-    print(f"loader, 1 process (paper augmentations, 256/64): {single:7.1f} samples/s per process")
-    print(f"loader, {args.workers} worker processes:              {multi:7.1f} samples/s")
+    ds = paper_dataset(data)
+    print(f"loader, 1 process (paper augmentations, 256/64): {process_rate(ds, args.samples):6.1f} samples/s")
+    rate = loader_rate(ds, args.workers, args.samples, args.batch)
+    print(f"loader, {args.workers} worker processes, batches of {args.batch}:  {rate:6.1f} samples/s")
     torch.set_num_threads(threads)
-    sec, bs, dev = step_time(data, config, args.steps)
-    print(f"train step ({config} config, batch {bs}, {dev}): {1000 * sec:.1f} ms ({bs / sec:.1f} samples/s)")
+    for variant in args.variant or [None]:
+        sec, bs, dev = step_time(data, config, variant, args.steps)
+        name = f"{config} config" + (f", {variant}" if variant else "")
+        print(f"train step ({name}, batch {bs}, {dev}): {1000 * sec:.1f} ms ({bs / sec:.1f} samples/s)")
 
 
 if __name__ == "__main__":
