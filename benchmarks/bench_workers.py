@@ -1,6 +1,17 @@
 """Images/s at 1 and 2 worker processes in one run, and the scaling ratio (target >= 0.9x linear).
 
+Two figures per configuration:
+- wall: samples / wall time of the whole `run_render` call (planning, process start-up, scene
+  build, the last worker's tail), what a short run sees;
+- steady: workers / mean per-sample time inside the workers (render + annotate + write), what a
+  long run such as 50,000 images converges to; contention between workers (cores, memory
+  bandwidth, a shared GPU) slows each sample and so shows up here, start-up does not.
+
+The first two configurations give the scaling ratio. On a GPU machine, e.g.:
+    python benchmarks/bench_workers.py --device gpu --runs 1x16 2x8 4x4 --n 64
+
 Usage: python benchmarks/bench_workers.py [--backend blender] [--n 16] [--quality default]
+       [--device auto|cpu|gpu] [--runs WxT ...]
 """
 
 from __future__ import annotations
@@ -14,38 +25,49 @@ from pathlib import Path
 from scgen.runner import RenderJob, run_render
 
 
-def images_per_second(backend: str, n: int, workers: int, threads: int, quality: str, out: Path) -> float:
-    job = RenderJob(out=out, n=n, seed=0, backend=backend, quality=quality, workers=workers, threads=threads)
+def measure(job: RenderJob) -> tuple[float, float]:
+    """(wall images/s, steady-state images/s) of one run."""
     t0 = time.perf_counter()
-    run_render(job, progress=False)
-    return n / (time.perf_counter() - t0)
+    summary = run_render(job, progress=False)
+    wall = job.n / (time.perf_counter() - t0)
+    per_sample = (summary["render_s"] + summary["other_s"]) / summary["rendered"]
+    return wall, job.workers / per_sample
+
+
+def parse_run(text: str) -> tuple[int, int]:
+    """'2x8' -> (2 workers, 8 renderer threads each)."""
+    workers, threads = (int(v) for v in text.lower().split("x"))
+    return workers, threads
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--backend", default="blender")
     ap.add_argument("--n", type=int, default=16)
     ap.add_argument("--quality", default="default")
+    ap.add_argument("--device", default="auto", choices=["auto", "cpu", "gpu"])
+    ap.add_argument("--runs", nargs="+", type=parse_run, default=None, metavar="WxT",
+                    help="workers x threads per worker [1x1, {cores}x1, 1x{cores}]")  # fmt: skip
     args = ap.parse_args()
     cores = os.cpu_count() or 1
+    runs = args.runs or [(1, 1), (cores, 1), (1, cores)]
     tmp = Path(tempfile.mkdtemp())
-    runs = {  # (workers, renderer threads per worker)
-        "1 worker x 1 thread": (1, 1),
-        f"{cores} workers x 1 thread": (cores, 1),
-        f"1 worker x {cores} threads": (1, cores),
-    }
-    rates = {
-        name: images_per_second(args.backend, args.n, w, t, args.quality, tmp / f"w{w}t{t}")
-        for name, (w, t) in runs.items()
-    }
-    print(f"{args.backend} ({args.quality}, 640x480), {args.n} samples per run, {cores} cores")
-    for name, r in rates.items():
-        print(f"  {name:<22s} {r:.3f} images/s  ({1 / r:.2f} s/image, all included)")
-    names = list(rates)
-    ratio = rates[names[1]] / rates[names[0]]
-    print(f"  process scaling: {ratio:.2f}x with {cores} workers = {ratio / cores:.2f} of linear")
-    versus = rates[names[1]] / rates[names[2]]
-    print(f"  {cores} single-thread workers vs one {cores}-thread worker: {versus:.2f}x")
+    rates = {}
+    for w, t in runs:
+        job = RenderJob(
+            out=tmp / f"w{w}t{t}", n=args.n, seed=0, backend=args.backend, quality=args.quality,
+            device=args.device, workers=w, threads=t,
+        )  # fmt: skip
+        rates[f"{w} worker(s) x {t} thread(s)"] = measure(job)
+    print(f"{args.backend} ({args.quality}, {args.device}, 640x480), {args.n} samples per run, {cores} cores")
+    print(f"  {'':<28s} {'wall img/s':>10s} {'steady img/s':>12s}")
+    for name, (wall, steady) in rates.items():
+        print(f"  {name:<28s} {wall:10.3f} {steady:12.3f}")
+    if len(runs) > 1 and runs[0] == (1, 1):
+        (one, many), k = list(rates.values())[:2], runs[1][0]
+        for label, i in (("wall", 0), ("steady", 1)):
+            ratio = many[i] / one[i]
+            print(f"  {label:<6s} scaling: {ratio:.2f}x with {k} workers = {ratio / k:.2f} of linear")
 
 
 if __name__ == "__main__":
