@@ -7,17 +7,20 @@ Two figures per configuration:
   long run such as 50,000 images converges to; contention between workers (cores, memory
   bandwidth, a shared GPU) slows each sample and so shows up here, start-up does not.
 
-The first two configurations give the scaling ratio. On a GPU machine, e.g.:
+With --repeat R the configurations run R times in turn (1, 2, 3, 1, 2, 3, ...) and each figure is
+the median, so a drift in the machine's speed hits every configuration alike. The first two
+configurations give the scaling ratio. On a GPU machine, e.g.:
     python benchmarks/bench_workers.py --device gpu --runs 1x16 2x8 4x4 --n 64
 
 Usage: python benchmarks/bench_workers.py [--backend blender] [--n 16] [--quality default]
-       [--device auto|cpu|gpu] [--runs WxT ...]
+       [--device auto|cpu|gpu] [--runs WxT ...] [--repeat R]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -48,18 +51,27 @@ def main() -> None:
     ap.add_argument("--device", default="auto", choices=["auto", "cpu", "gpu"])
     ap.add_argument("--runs", nargs="+", type=parse_run, default=None, metavar="WxT",
                     help="workers x threads per worker [1x1, {cores}x1, 1x{cores}]")  # fmt: skip
+    ap.add_argument("--repeat", type=int, default=1, help="Rounds over all configurations; medians.")
     args = ap.parse_args()
     cores = os.cpu_count() or 1
     runs = args.runs or [(1, 1), (cores, 1), (1, cores)]
     tmp = Path(tempfile.mkdtemp())
-    rates = {}
-    for w, t in runs:
-        job = RenderJob(
-            out=tmp / f"w{w}t{t}", n=args.n, seed=0, backend=args.backend, quality=args.quality,
-            device=args.device, workers=w, threads=t,
-        )  # fmt: skip
-        rates[f"{w} worker(s) x {t} thread(s)"] = measure(job)
-    print(f"{args.backend} ({args.quality}, {args.device}, 640x480), {args.n} samples per run, {cores} cores")
+    samples: dict[str, list[tuple[float, float]]] = {f"{w} worker(s) x {t} thread(s)": [] for w, t in runs}
+    for r in range(args.repeat):
+        for (w, t), name in zip(runs, samples, strict=True):
+            job = RenderJob(
+                out=tmp / f"r{r}w{w}t{t}", n=args.n, seed=0, backend=args.backend, quality=args.quality,
+                device=args.device, workers=w, threads=t,
+            )  # fmt: skip
+            samples[name].append(measure(job))
+    rates = {
+        name: (statistics.median(v[0] for v in vals), statistics.median(v[1] for v in vals))
+        for name, vals in samples.items()
+    }
+    print(
+        f"{args.backend} ({args.quality}, {args.device}, 640x480), {args.n} samples per run, {cores} cores,"
+        f" median of {args.repeat}"
+    )
     print(f"  {'':<28s} {'wall img/s':>10s} {'steady img/s':>12s}")
     for name, (wall, steady) in rates.items():
         print(f"  {name:<28s} {wall:10.3f} {steady:12.3f}")
