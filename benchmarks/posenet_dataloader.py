@@ -3,9 +3,10 @@
 Prints (1) training samples/s of one loader process with the paper's augmentations (DZI, brightness/
 contrast at p=0.8, background replacement at p=0.5) at the paper's 256/64 resolution, (2) the DataLoader
 throughput with --workers processes, (3) the training step time (forward, losses, backward, Ranger step)
-of --config on the current device (paper on a GPU, smoke on a CPU by default).
+of --config (or each --variant) on the current device (paper on a GPU, smoke on a CPU by default).
 
-Usage: python benchmarks/posenet_dataloader.py [--data DIR] [--workers 2] [--config paper|smoke] [--steps 5]
+Usage: python benchmarks/posenet_dataloader.py [--data DIR] [--workers 2] [--batch 8] [--config paper|smoke]
+       [--variant V ...] [--steps 5]
 Without --data, 48 samples at 640x480 are rendered with Mitsuba into a temporary folder first.
 """
 
@@ -20,7 +21,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from posenet.config import load_config
-from posenet.data import EpochSampler, PoseDataset, open_split
+from posenet.data import PoseDataset, open_split
 from posenet.losses import pose_losses
 from posenet.models import build_model
 from posenet.train import make_optimizer, worker_init
@@ -43,30 +44,20 @@ def process_rate(ds: PoseDataset, n: int) -> float:
 
 
 def loader_rate(ds: PoseDataset, workers: int, n: int, batch: int) -> float:
-    """Samples/s through a training-like DataLoader (batches, `workers` persistent processes), once warm."""
-    sampler = EpochSampler(len(ds), batch, seed=0)
-    loader = DataLoader(
-        ds,
-        batch_size=batch,
-        sampler=sampler,
-        num_workers=workers,
-        persistent_workers=True,
-        worker_init_fn=worker_init,
-    )
-    done, tic, batches = 0, None, 0
-    for epoch in range(10**6):
-        sampler.set_epoch(epoch)
-        for _ in loader:
-            batches += 1
-            # batches arrive round-robin: after two from each process, every one is up and has built
-            # its background pool (a one-off per process, seconds each, that a long run amortises)
-            if tic is None and batches >= 2 * max(workers, 1):
-                tic = time.perf_counter()
-            elif tic is not None:
-                done += batch
-                if done >= n:
-                    return done / (time.perf_counter() - tic)
-    raise AssertionError("unreachable")
+    """Samples/s through a training-like DataLoader (batches, `workers` processes), once warm.
+
+    The keys run through several epochs in one pass: with a small benchmark dataset an epoch is one
+    or two batches, and the loader would drain and restart at its first process every epoch.
+    """
+    warm = 2 * max(workers, 1) * batch  # two batches per process: all up, background pools built
+    keys = [(1 + k // len(ds), k % len(ds)) for k in range(warm + n)]
+    loader = DataLoader(ds, batch_size=batch, sampler=keys, num_workers=workers, worker_init_fn=worker_init)
+    done, tic = 0, None
+    for b in loader:
+        done += len(b["key"])
+        if tic is None and done == warm:
+            tic, done = time.perf_counter(), 0
+    return done / (time.perf_counter() - tic)
 
 
 def step_time(data: Path, config: str, variant: str | None, steps: int) -> tuple[float, int, str]:
