@@ -155,3 +155,19 @@ def test_scene_is_updated_in_place_and_renders_are_reproducible(model):
     np.testing.assert_array_equal(first.instance, again.instance)
     np.testing.assert_array_equal(first.depth, again.depth)
     assert np.abs(first.rgb.astype(int) - again.rgb).max() <= 1  # same seed, same image
+
+
+def test_without_props_nothing_shadows_the_target_even_on_a_fresh_backends_first_sample(model):
+    """Only props may block the probe sun (shadow linking): with none in the scene, no target pixel is
+    sun-blocked, also before any prop was ever made (Blender ignores an empty blocker collection)."""
+    cfg = load_config(resolution=(160, 120))
+    specs = [s for s in (sample_scene(0, i, cfg, model.diameter) for i in range(40)) if not s.props]
+    spec = min(specs, key=lambda s: s.target.t_vec[2])  # the nearest target: many pixels
+    backend = BlenderBackend(model, quality="draft", threads=1)
+    try:
+        buffers = backend.render(spec)
+    finally:
+        backend.close()
+    target = buffers.instance == TARGET_ID
+    assert target.sum() > 100
+    assert not buffers.sun_blocked[target].any()

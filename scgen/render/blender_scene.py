@@ -86,7 +86,10 @@ class BlenderScene:
             scene.collection.objects.link(self.camera)
             scene.camera = self.camera
         self.target = self._target_object(model)
-        self.props: list[Any] = []
+        # Blender ignores shadow linking while the blocker collection is empty, and the target would
+        # then shadow itself in the probe on a first sample without props: the pool starts non-empty
+        self.props: list[Any] = [self._new_prop(0)]
+        self.props[0].hide_render = True
         self.sun = self._sun("sun", self.beauty, SUN_ANGLE_RAD)
         self.earthshine = self._sun("earthshine", self.beauty, SUN_ANGLE_RAD)
         self.earthshine.data.color = EARTHSHINE_COLOUR
