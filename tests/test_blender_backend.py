@@ -171,3 +171,24 @@ def test_without_props_nothing_shadows_the_target_even_on_a_fresh_backends_first
     target = buffers.instance == TARGET_ID
     assert target.sum() > 100
     assert not buffers.sun_blocked[target].any()
+
+
+def test_a_sample_does_not_depend_on_what_its_worker_rendered_before(model):
+    """Sample i must be the same on a fresh worker and after other samples (shards, resume, K workers)."""
+    cfg = load_config(resolution=(160, 120))
+    specs = [sample_scene(0, i, cfg, model.diameter) for i in range(40)]
+    busy = max(specs, key=lambda s: len(s.props))
+    for spec in (min((s for s in specs if not s.props), key=lambda s: s.target.t_vec[2]), specs[1]):
+        results = []
+        for history in ([], [busy]):
+            backend = BlenderBackend(model, quality="draft", threads=1)
+            try:
+                for earlier in history:
+                    backend.render(earlier)
+                results.append(backend.render(spec))
+            finally:
+                backend.close()
+        fresh, after = results
+        for name in ("instance", "depth", "target_depth", "normal", "sun_blocked"):
+            np.testing.assert_array_equal(getattr(fresh, name), getattr(after, name), err_msg=name)
+        assert np.abs(fresh.rgb.astype(int) - after.rgb).max() <= 1
