@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 from pathlib import Path
@@ -19,21 +18,9 @@ from posenet.evaluate import evaluate, format_table
 from posenet.train import train as run_train
 from posenet.viz import viz
 from scgen.atomic import atomic_write_text
+from scgen.errors import one_line_errors
 
 PATH = click.Path(path_type=Path)
-
-
-def one_line_errors(fn):
-    """Turn PosenetError into click's one-line 'Error: ...' and exit status 1."""
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        try:
-            return fn(*args, **kwargs)
-        except PosenetError as exc:
-            raise click.ClickException(str(exc)) from None
-
-    return wrapper
 
 
 def _percent(value: float | None) -> str:
@@ -65,7 +52,7 @@ def main() -> None:
 @click.option(
     "--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config is given)."
 )
-@one_line_errors
+@one_line_errors(PosenetError)
 def train(
     data: Path,
     out: Path,
@@ -103,7 +90,7 @@ def train(
     "--by-factor", type=PATH, default=None, help="Sample-groups file: per-group ADD@0.02 m (Table 5)."
 )
 @click.option("--workers", type=click.IntRange(min=0), default=2, show_default=True, help="Loader processes.")
-@one_line_errors
+@one_line_errors(PosenetError)
 def eval_cmd(
     data: Path,
     ckpt: tuple[Path, ...],
@@ -164,7 +151,7 @@ def eval_cmd(
               help="Relative std of centre shift and log size change (0: exact GT boxes).")  # fmt: skip
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--obj-id", type=int, default=1, show_default=True)
-@one_line_errors
+@one_line_errors(PosenetError)
 def boxes(data: Path, out: Path, split: str, noise: float, seed: int, obj_id: int) -> None:
     """Write one box per image of a split from the GT full-object boxes, optionally perturbed."""
     entries = boxes_from_gt([i for i in scan_split(data, split, obj_id) if i.px_count_visib > 0], noise, seed)

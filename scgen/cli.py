@@ -2,28 +2,14 @@
 
 from __future__ import annotations
 
-import functools
 import os
 import re
 from pathlib import Path
 
 import click
 
-from scgen.errors import ScgenError
+from scgen.errors import ScgenError, one_line_errors
 from scgen.preview import preview
-
-
-def one_line_errors(fn):
-    """Turn ScgenError into click's one-line 'Error: ...' and exit status 1."""
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        try:
-            return fn(*args, **kwargs)
-        except ScgenError as exc:
-            raise click.ClickException(str(exc)) from None
-
-    return wrapper
 
 
 def parse_resolution(text: str | None) -> tuple[int, int] | None:
@@ -105,7 +91,7 @@ def main() -> None:
 @click.option("--xyz-dtype", type=click.Choice(["float16", "float32"]), default="float16", show_default=True)
 @click.option("--save-depth", is_flag=True, help="Also write BOP uint16 depth maps.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-@one_line_errors
+@one_line_errors(ScgenError)
 def render(
     n,
     out,
@@ -155,7 +141,7 @@ def render(
 
 @main.command()
 @click.argument("dataset", type=click.Path(path_type=Path))
-@one_line_errors
+@one_line_errors(ScgenError)
 def validate(dataset: Path) -> None:
     """Re-check a dataset's invariants (files, masks, boxes, xyz reprojection) and print a verdict."""
     from scgen.validate import validate_dataset
@@ -204,7 +190,7 @@ def validate(dataset: Path) -> None:
     default=None,
     help="Where --sample-groups writes (default DATASET/groups_SPLIT_nN_sS.json).",
 )
-@one_line_errors
+@one_line_errors(ScgenError)
 def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_groups, seed, groups_out) -> None:
     """Group counts of the robustness factors: illumination, shadow, occlusion, background, distance."""
     import json
@@ -235,7 +221,7 @@ def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_grou
 @main.command()
 @click.argument("out", type=click.Path(path_type=Path))
 @click.argument("shards", nargs=-1, required=True, type=click.Path(path_type=Path))
-@one_line_errors
+@one_line_errors(ScgenError)
 def merge(out: Path, shards: tuple[Path, ...]) -> None:
     """Join shard outputs (same seed, config and model) into OUT, as if rendered in one run."""
     from scgen.merge import merge_shards
