@@ -12,6 +12,7 @@ from tqdm import tqdm
 from scgen.annotate.annotate import mask_bbox
 from scgen.dataset import Layout, open_dataset, read_json, read_metadata
 from scgen.exr import read_xyz_exr
+from scgen.scenes.geometry import project
 
 REPROJ_TOL_PX = 0.5
 REPROJ_MIN_SHARE = 0.995
@@ -114,7 +115,5 @@ def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: d
 def reprojection_error(C: np.ndarray, u: np.ndarray, v: np.ndarray, K: np.ndarray, R: np.ndarray,
                        t: np.ndarray) -> np.ndarray:  # fmt: skip
     """Pixel distance between K(R C + t) and the pixel centres (u, v) the coordinates were stored at."""
-    X = C @ R.T + t
-    p = X @ K.T
-    uv = p[:, :2] / p[:, 2:3]
+    uv = project(K, C @ R.T + t)
     return np.hypot(uv[:, 0] - u, uv[:, 1] - v)

@@ -21,6 +21,7 @@ from scgen.render.base import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.blender_env import import_bpy, select_device
 from scgen.render.blender_scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender_settings import preset
+from scgen.scenes.geometry import project
 from scgen.scenes.spec import SceneSpec
 
 GRAZING = 1e-4  # |n.s| below this: the surface is edge-on to the sun, its visibility is not measured
@@ -87,8 +88,7 @@ def props_may_hide_target(spec: SceneSpec, hull: np.ndarray, instance: np.ndarra
     x = hull @ spec.target.R_mat.T + spec.target.t_vec
     if x[:, 2].min() <= 0:  # partly behind the camera: the projected box is not a bound
         return True
-    K = spec.camera.K_mat
-    uv = (x[:, :2] / x[:, 2:]) @ K[:2, :2].T + K[:2, 2]
+    uv = project(spec.camera.K_mat, x)
     h, w = instance.shape
     u0, v0 = np.clip(np.floor(uv.min(0)).astype(int), 0, [w, h])
     u1, v1 = np.clip(np.ceil(uv.max(0)).astype(int) + 1, 0, [w, h])
