@@ -6,9 +6,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import OpenEXR
 
 from posenet.errors import PosenetError
+from scgen.exr import read_xyz_exr
 
 
 def read_bgr(path: Path) -> np.ndarray:
@@ -32,7 +32,6 @@ def read_xyz(path: Path) -> np.ndarray:
     if not path.is_file():
         raise PosenetError(f"missing xyz map {path} (the dataset must ship xyz maps, see docs/dataset.md)")
     try:
-        channels = OpenEXR.File(str(path), separate_channels=True).channels()
-        return np.stack([channels[c].pixels for c in "XYZ"], axis=-1).astype(np.float32)
+        return read_xyz_exr(path)
     except (KeyError, RuntimeError, OSError) as exc:
         raise PosenetError(f"cannot read xyz map {path} (needs channels X, Y, Z): {exc}") from exc
