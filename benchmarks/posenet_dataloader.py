@@ -22,9 +22,8 @@ from torch.utils.data import DataLoader
 
 from posenet.config import load_config
 from posenet.data import PoseDataset, open_split
-from posenet.losses import pose_losses
 from posenet.models import build_model
-from posenet.train import make_optimizer, worker_init
+from posenet.train import make_optimizer, pm_loss_points, train_step, worker_init
 from scgen.runner import RenderJob, run_render
 
 
@@ -71,14 +70,11 @@ def step_time(data: Path, config: str, variant: str | None, steps: int) -> tuple
     batch = {k: torch.stack([it[k] for it in items]).to(device) for k in items[0]}
     model = build_model(cfg.variant, mc).to(device).train()
     opt, _ = make_optimizer(model, cfg.optim, total_iters=steps + 2)
-    pm = torch.from_numpy(ds.obj.pm_points / ds.obj.extent.max()).float().to(device)
+    pm = pm_loss_points(ds.obj, device)
     times = []
     for _ in range(steps + 2):
         tic = time.perf_counter()
-        loss, _ = pose_losses(model(batch["roi_img"], batch["roi_coord2d"]), batch, pm, cfg.loss)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
+        train_step(model, opt, batch, pm, cfg)
         if device.type == "cuda":
             torch.cuda.synchronize()
         times.append(time.perf_counter() - tic)

@@ -26,6 +26,7 @@ from tqdm import tqdm
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
 from posenet.config import OptimConfig, TrainConfig
 from posenet.data import EpochSampler, open_split
+from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.losses import LOSS_TERMS, pose_losses
 from posenet.models import build_model
@@ -120,7 +121,18 @@ class _Log:
         self.bar.close()
 
 
-def _step(model: torch.nn.Module, optimizer, batch: dict[str, torch.Tensor], pm_points, cfg: TrainConfig):
+def pm_loss_points(obj: ObjectModel, device: torch.device) -> torch.Tensor:
+    """The point-matching loss's model points, scaled by the object's largest extent, on `device`."""
+    return torch.from_numpy(obj.pm_points / obj.extent.max()).float().to(device)
+
+
+def train_step(
+    model: torch.nn.Module,
+    optimizer: torch.optim.Optimizer,
+    batch: dict[str, torch.Tensor],
+    pm_points: torch.Tensor,
+    cfg: TrainConfig,
+) -> torch.Tensor:
     """One optimisation step; returns the detached (total, *terms) losses."""
     out = model(batch["roi_img"], batch["roi_coord2d"])
     loss, terms = pose_losses(out, batch, pm_points, cfg.loss)
@@ -176,7 +188,7 @@ def _train(
         scheduler.load_state_dict(state["scheduler"])
         step = int(state["step"])
     ddp = DistributedDataParallel(model) if world > 1 else model
-    pm_points = torch.from_numpy(dataset.obj.pm_points / dataset.obj.extent.max()).float().to(device)
+    pm_points = pm_loss_points(dataset.obj, device)
     loader = DataLoader(
         dataset,
         batch_size=o.batch_size // world,
@@ -212,7 +224,7 @@ def _train(
             sampler.set_epoch(epoch, skip)
             tic = time.perf_counter()
             for batch in loader:
-                values = _step(ddp, optimizer, _to(batch, device), pm_points, cfg)
+                values = train_step(ddp, optimizer, _to(batch, device), pm_points, cfg)
                 lr = optimizer.param_groups[0]["lr"]
                 scheduler.step()
                 step += 1
