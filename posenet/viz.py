@@ -75,9 +75,9 @@ def overlay_panel(data: Path, split: str, ckpts: list[Path], ids: list[int], wor
         rgb = cv2.imread(str(inst.rgb), cv2.IMREAD_COLOR)
         x0, y0, side = _crop_box(inst)
         tiles = [_label(_square_crop(rgb, x0, y0, side), f"#{im_id} input")]
+        gt = silhouette_contours(mesh, inst.K, inst.R, inst.t, inst.image_size)
         for variant, records in preds:
             img = rgb.copy()
-            gt = silhouette_contours(mesh, inst.K, inst.R, inst.t, inst.image_size)
             cv2.drawContours(img, gt, -1, GT_COLOUR, 1, cv2.LINE_AA)
             rec = records.get(im_id)
             if rec is not None:
