@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+import torch.nn.functional as F
 
 from posenet.featviz import feature_response
 from posenet.models.afr import AFR, GGCA, MECS, channel_descriptors
@@ -84,3 +85,27 @@ def test_feature_response_is_per_image_min_max_of_l2_norm() -> None:
     assert torch.equal(r[1], torch.zeros(4, 4))
     up = feature_response(f, size=16)
     assert up.shape == (2, 16, 16) and up.min() >= 0 and up.max() <= 1
+
+
+def test_mecs_is_its_equations() -> None:
+    """Paper eqs. mecs_channel to mecs_output, written out with the module's own weights."""
+    c, kernels = 16, (7, 11, 21)
+    mecs = MECS(c, reduction=4, kernels=kernels).eval()
+    x = torch.randn(2, c, 12, 10)
+    conv_in, lin1, lin2 = mecs.proj_in[0], mecs.channel_attention.mlp[0], mecs.channel_attention.mlp[2]
+    X = F.gelu(F.conv2d(x, conv_in.weight, conv_in.bias))
+
+    def psi(d: torch.Tensor) -> torch.Tensor:
+        return F.linear(F.relu(F.linear(d, lin1.weight, lin1.bias)), lin2.weight, lin2.bias)
+
+    pooled = (X.mean((2, 3)), X.amax((2, 3)), X.flatten(2).median(2).values)
+    A_c = sum(psi(d) for d in pooled)[:, :, None, None]  # no sigmoid: Σ_ρ ψ(ρ(X))
+    X_c = A_c * X
+    B = F.conv2d(X_c, mecs.base.weight, mecs.base.bias, padding=2, groups=c)
+    S = 0
+    for k, (dw_1k, dw_k1) in zip(kernels, mecs.strips, strict=True):
+        s_k = F.conv2d(B, dw_1k.weight, dw_1k.bias, padding=(0, k // 2), groups=c)
+        S = S + F.conv2d(s_k, dw_k1.weight, dw_k1.bias, padding=(k // 2, 0), groups=c)
+    F_mecs = torch.sigmoid(F.conv2d(S, mecs.spatial.weight, mecs.spatial.bias)) * X_c
+    with torch.no_grad():
+        assert torch.allclose(mecs(x), F_mecs, atol=1e-5, rtol=1e-4)

@@ -1,7 +1,9 @@
 """AFR (paper §3.3): GGCA ‖ MECS on the decoded 64×64 feature, fused, added back with γ_afr = 0 at init.
 
-Widths follow the reading of the paper that reproduces its +0.45M (reference `gdrnet.md` §6.3, reading D):
-MECS holds three C×C 1×1 convs (input projection, spatial-attention map, output projection), and the
+MECS follows the paper's equations literally (eqs. mecs_channel to mecs_output): a GELU 1×1 input
+projection, then channel and spatial attention with no gate on the channel descriptors' MLP outputs and no
+output projection, so it holds two C×C 1×1 convs (reference `gdrnet.md` §6.3, reading A: AFR 0.391M at
+C=256; the paper's +0.45M matched reading D, which adds a third C×C 1×1 as an output projection). The
 fusion is 1×1 (n·C → C), GELU, 1×1 (C → C), with n the number of enabled branches.
 """
 
@@ -48,7 +50,10 @@ def channel_descriptors(x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
 
 
 class MedianChannelAttention(nn.Module):
-    """A_c = Σ_ρ σ(ψ(ρ(X))) over ρ ∈ {avg, max, median} with one shared MLP ψ (reduction r)."""
+    """A_c = Σ_ρ ψ(ρ(X)) over ρ ∈ {avg, max, median} with one shared MLP ψ (reduction r), eq. mecs_channel.
+
+    As written in the paper, no sigmoid gates the sum or its terms: A_c is an unbounded channel scale.
+    """
 
     def __init__(self, channels: int, reduction: int) -> None:
         super().__init__()
@@ -58,8 +63,7 @@ class MedianChannelAttention(nn.Module):
         )
 
     def forward(self, x: Tensor) -> Tensor:
-        gates = torch.sigmoid(self.mlp(torch.stack(channel_descriptors(x))))  # (3, B, C)
-        return gates.sum(0)[:, :, None, None]
+        return self.mlp(torch.stack(channel_descriptors(x))).sum(0)[:, :, None, None]  # (3, B, C) summed
 
 
 def strip_conv(channels: int, k: int) -> nn.Sequential:
@@ -73,8 +77,7 @@ def strip_conv(channels: int, k: int) -> nn.Sequential:
 class MECS(nn.Module):
     """Median-enhanced channel then multi-scale strip spatial attention on a GELU 1×1 projection.
 
-    X = GELU(W_in x); X_c = A_c ⊙ X; B = DW5×5(X_c); S = Σ_k strip_k(B);
-    out = W_out(σ(W_s S) ⊙ X_c).
+    X = GELU(W_in x); X_c = A_c ⊙ X; B = DW5×5(X_c); S = Σ_k DW k×1(DW 1×k(B)); F_mecs = σ(W_s S) ⊙ X_c.
     """
 
     def __init__(self, channels: int, reduction: int, kernels: tuple[int, ...]) -> None:
@@ -84,14 +87,13 @@ class MECS(nn.Module):
         self.base = nn.Conv2d(channels, channels, 5, padding=2, groups=channels)
         self.strips = nn.ModuleList(strip_conv(channels, k) for k in kernels)
         self.spatial = conv1x1(channels, channels)
-        self.proj_out = conv1x1(channels, channels)
 
     def forward(self, x: Tensor) -> Tensor:
         x = self.proj_in(x)
         x_c = self.channel_attention(x) * x
         base = self.base(x_c)
         s = sum(strip(base) for strip in self.strips)
-        return self.proj_out(torch.sigmoid(self.spatial(s)) * x_c)
+        return torch.sigmoid(self.spatial(s)) * x_c
 
 
 class AFR(nn.Module):
