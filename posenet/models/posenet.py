@@ -16,11 +16,26 @@ from .geo_head import GeoHead
 from .pnp import PatchPnP
 
 
+def pnp_in_channels(num_regions: int) -> int:
+    """Channels of `pnp_input`: xyz 3, visible mask 1, surface regions, RoI coordinates 2."""
+    return 3 + 1 + num_regions + 2
+
+
+def pnp_input(xyz: Tensor, mask: Tensor, region: Tensor, roi_coord2d: Tensor) -> Tensor:
+    """X_pnp = concat[M_2D-3D, M_vis, M_SRA, U_roi] from the head's raw outputs (mask and region logits).
+
+    M_vis is the mask probability (sigmoid), M_SRA the softmax over the regions without background.
+    """
+    return torch.cat([xyz, mask.sigmoid(), region[:, 1:].softmax(1), roi_coord2d], 1)
+
+
 class PoseNet(nn.Module):
     """Backbone → geometric head [AFR] → (mask, xyz, region) → Patch-PnP [PGSA] → (rot6d, SITE).
 
-    Patch-PnP sees concat[xyz, roi_coord2d, softmax(region[1:])] (3 + 2 + num_regions channels); the
-    mask is not an input, as in GDR-Net. Pose decoding lives in `posenet.geometry`.
+    Patch-PnP sees the paper's X_pnp = Φ(concat[M_2D-3D, M_vis, M_SRA], U_roi) (eq. pnp_input_overall):
+    concat[xyz, sigmoid(mask), softmax(region[1:]), roi_coord2d], 3 + 1 + num_regions + 2 channels. (GDR-Net
+    leaves the mask out; the paper lists the visible mask among the inputs.) Pose decoding lives in
+    `posenet.geometry`.
     """
 
     def __init__(self, config: ModelConfig) -> None:
@@ -39,7 +54,7 @@ class PoseNet(nn.Module):
             )
         self.geo_head = GeoHead(self.backbone.out_channels, config.head_channels, config.num_regions, afr)
         self.pnp = PatchPnP(
-            in_channels=3 + 2 + config.num_regions,
+            in_channels=pnp_in_channels(config.num_regions),
             channels=config.pnp_channels,
             in_res=config.output_res,
             fc_dims=config.fc_dims,
@@ -49,8 +64,7 @@ class PoseNet(nn.Module):
     def forward(self, roi_img: Tensor, roi_coord2d: Tensor) -> dict[str, Tensor]:
         """roi_img B×3×R×R in [0, 1], roi_coord2d B×2×r×r → dict of head outputs (see module docs)."""
         features, mask, xyz, region = self.geo_head(self.backbone(roi_img))
-        pnp_in = torch.cat([xyz, roi_coord2d, region[:, 1:].softmax(1)], 1)
-        rot6d, site = self.pnp(pnp_in)
+        rot6d, site = self.pnp(pnp_input(xyz, mask, region, roi_coord2d))
         return {
             "mask": mask,
             "xyz": xyz,
