@@ -67,7 +67,7 @@ def evaluate(
     dataset = open_split(
         data, split, cfg.data, model.config, train=False, boxes_file=boxes, image_ids=image_ids
     )
-    points = torch.from_numpy(dataset.obj.vertices).to(device)
+    points = torch.from_numpy(dataset.obj.pm_points).to(device)  # uniform surface points, as the PM loss
     loader = DataLoader(dataset, batch_size=1, num_workers=workers)
     errors: dict[str, list[float]] = {}
     records, times = [], []
