@@ -27,3 +27,24 @@ def posenet_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
         run_render(job, progress=False)
         tmp.rename(out)
     return out
+
+
+def occluded_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """6 samples of seed 0, all in 'train', each target 80-95 % hidden by an occluder (the heavy group)."""
+    out = tmp_path_factory.getbasetemp() / "posenet_occluded_ds"
+    if not out.is_dir():
+        tmp = out.with_name("posenet_occluded_ds.partial")
+        heavy = {"group_probs": {"none": 0.0, "slight": 0.0, "moderate": 0.0, "heavy": 1.0}}
+        job = RenderJob(
+            out=tmp,
+            n=6,
+            seed=0,
+            backend="mitsuba",
+            quality="draft",
+            resolution=RESOLUTION,
+            overrides={"occluders": {**heavy, "target_r_occ": {"heavy": [0.8, 0.95]}}},
+            ratios=(1.0, 0.0, 0.0),
+        )
+        run_render(job, progress=False)
+        tmp.rename(out)
+    return out

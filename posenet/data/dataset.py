@@ -76,9 +76,10 @@ class PoseDataset(Dataset):
         inst = self.instances[idx]
         rng = np.random.default_rng([self.seed, epoch, idx]) if self.train else None
         roi = self._roi(inst, rng)
-        full = read_mask(inst.mask) if self.train else None  # full-resolution full mask, read once
+        # full-resolution full and visible masks: each file is read once per item
+        full, visib = (read_mask(inst.mask), read_mask(inst.mask_visib)) if self.train else (None, None)
         item = {
-            "roi_img": self._roi_image(inst, roi, rng, full),
+            "roi_img": self._roi_image(inst, roi, rng, visib),
             "roi_coord2d": torch.from_numpy(roi_coord2d(roi, self.output_res, inst.image_size)),
             "K": torch.from_numpy(inst.K).float(),
             "R": torch.from_numpy(inst.R).float(),
@@ -88,8 +89,8 @@ class PoseDataset(Dataset):
             "resize_ratio": torch.tensor(self.output_res / roi.scale, dtype=torch.float32),
             "key": torch.tensor(inst.key),
         }
-        if full is not None:
-            item.update(self._targets(inst, roi, full))
+        if full is not None and visib is not None:
+            item.update(self._targets(inst, roi, full, visib))
             item["site"] = site_encode(
                 item["t"], item["K"], item["crop_center"], item["box_wh"], item["resize_ratio"]
             )
@@ -105,13 +106,15 @@ class PoseDataset(Dataset):
         return roi_from_box(bbox, inst.image_size, self.cfg.pad_scale, jitter, rng)
 
     def _roi_image(
-        self, inst: Instance, roi: Roi, rng: np.random.Generator | None, full: np.ndarray | None
+        self, inst: Instance, roi: Roi, rng: np.random.Generator | None, visib: np.ndarray | None
     ) -> torch.Tensor:
+        """The RoI crop, augmented when `rng` is given; `visib` is the full-resolution visible mask."""
         bgr = crop(read_bgr(inst.rgb), roi, self.input_res, nearest=False)
         img = bgr[..., ::-1].astype(np.float32) / 255.0
-        if rng is not None and full is not None and rng.random() < self.cfg.bg_prob:
-            # keep the full projected target (occluders in front of it stay), replace everything else
-            keep = crop(full, roi, self.input_res, nearest=True)
+        if rng is not None and visib is not None and rng.random() < self.cfg.bg_prob:
+            # keep only the visible target, as GDR-Net does: keeping the full mask would keep the part of
+            # an occluder that covers the target, whose edge would trace the target's hidden outline
+            keep = crop(visib, roi, self.input_res, nearest=True)
             img = augment.replace_background(img, keep, self._background(rng))
         if rng is not None and rng.random() < self.cfg.color_prob:
             img = augment.brightness_contrast(img, rng, self.cfg.brightness, self.cfg.contrast)
@@ -129,11 +132,14 @@ class PoseDataset(Dataset):
     def _target_free(inst: Instance) -> np.ndarray:
         return augment.paint_out(read_bgr(inst.rgb)[..., ::-1].copy(), read_mask(inst.mask))
 
-    def _targets(self, inst: Instance, roi: Roi, full_mask: np.ndarray) -> dict[str, torch.Tensor]:
+    def _targets(
+        self, inst: Instance, roi: Roi, full_mask: np.ndarray, visib_mask: np.ndarray
+    ) -> dict[str, torch.Tensor]:
+        """Dense training targets at output resolution from the full-resolution masks and the xyz map."""
         r = self.output_res
         x0, y0 = inst.xyz_box[:2]
         xyz = crop(read_xyz(inst.xyz), roi, r, nearest=True, offset=(x0, y0))
-        visib = crop(read_mask(inst.mask_visib), roi, r, nearest=True)
+        visib = crop(visib_mask, roi, r, nearest=True)
         full = crop(full_mask, roi, r, nearest=True)
         xyz_n = np.where(visib[..., None] > 0, xyz / self.obj.extent + 0.5, 0.0).astype(np.float32)
         return {
@@ -156,13 +162,15 @@ def open_split(
 ) -> PoseDataset:
     """The Dataset of one split of the dataset folder `root` (every check of the folder happens here).
 
-    Training keeps instances visible above `min_visib_fract`; evaluation keeps every instance with a
-    visible pixel, restricted to `image_ids` when given.
+    Both modes keep every instance with a visible pixel, restricted to `image_ids` when given; training
+    also drops instances visible by no more than `min_visib_fract` when that is above 0 (GDR-Net used
+    0.3), so with 0 it trains on every instance evaluation scores.
     """
     obj = load_object_model(root, cfg.obj_id, model_cfg.num_regions, cfg.num_pm_points)
     instances = [i for i in scan_split(root, split, cfg.obj_id) if i.px_count_visib > 0]
     if train:
-        instances = [i for i in instances if i.visib_fract > cfg.min_visib_fract]
+        if cfg.min_visib_fract > 0:
+            instances = [i for i in instances if i.visib_fract > cfg.min_visib_fract]
         missing = [p for i in instances for p in (i.xyz, i.mask, i.mask_visib) if not p.is_file()]
         if missing:
             raise PosenetError(f"missing xyz maps or masks ({len(missing)} file(s)), e.g. {missing[0]}")
