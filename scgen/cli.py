@@ -62,8 +62,13 @@ def main() -> None:
     default=None,
     help="TOML/YAML file overriding any sampling distribution (see docs/config.md).",
 )
-@click.option("--backgrounds", "backgrounds_dir", type=click.Path(path_type=Path), default=None,
-              help="Folder of your own background images: adds the background kind 'user'.")
+@click.option(
+    "--backgrounds",
+    "backgrounds_dir",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Folder of your own background images: adds the background kind 'user'.",
+)
 @click.option("--resolution", default=None, help="Image size WxH (default 640x480); keeps the field of view.")
 @click.option("--quality", default="default", show_default=True, help="draft | default | high.")
 @click.option("--device", default="auto", show_default=True, help="Blender device: auto | cpu | gpu.")
