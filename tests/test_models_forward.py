@@ -11,6 +11,7 @@ import torch
 
 from posenet.errors import PosenetError
 from posenet.models import VARIANTS, ModelConfig, build_model
+from posenet.models.backbone import Backbone
 
 
 def inputs(config: ModelConfig, batch: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -121,3 +122,46 @@ def test_build_model_refuses_a_config_of_another_variant() -> None:
         build_model("resnet")
     with pytest.raises(PosenetError, match="input_res / 4"):
         ModelConfig(input_res=256, output_res=32)
+
+
+def test_pnp_input_is_xyz_visible_mask_regions_and_roi_coordinates() -> None:
+    config = ModelConfig.smoke("gdrnet")
+    model = build_model("gdrnet", config).eval()
+    assert model.pnp.encoder[0][0].in_channels == 3 + 1 + config.num_regions + 2
+    seen, shift = {}, {"mask": 0.0}
+
+    def edit_head(module: torch.nn.Module, args: tuple, out: tuple) -> tuple:
+        features, mask, xyz, region = out
+        return features, mask + shift["mask"], xyz, region
+
+    model.geo_head.register_forward_hook(edit_head)
+    model.pnp.register_forward_pre_hook(lambda module, args: seen.update(x=args[0]))
+    img, coord = inputs(config, batch=2)
+    with torch.no_grad():
+        out = model(img, coord)
+        x = seen["x"]
+        assert x.shape[1] == 3 + 1 + config.num_regions + 2
+        assert torch.equal(x[:, :3], out["xyz"]) and torch.equal(x[:, 3:4], out["mask"].sigmoid())
+        assert torch.allclose(x[:, 4:-2], out["region"][:, 1:].softmax(1)) and torch.equal(x[:, -2:], coord)
+        shift["mask"] = 3.0  # only the mask logits change: the pose must see it
+        moved = model(img, coord)
+    assert torch.equal(moved["xyz"], out["xyz"]) and torch.equal(moved["region"], out["region"])
+    for key in ("rot6d", "site"):
+        assert (moved[key] - out[key]).abs().max() > 1e-3 * out[key].abs().max()
+
+
+@pytest.mark.parametrize(("name", "branch_end"), [("resnet18", "bn2"), ("convnext_atto", "mlp.fc2")])
+def test_from_scratch_residual_branches_start_open(name: str, branch_end: str) -> None:
+    """timm's from-scratch init closes every residual branch (ResNet's last BN at 0, ConvNeXt's layer
+    scale at 1e-6), leaving a ~20 px receptive field; ours must start with the branches contributing."""
+    torch.manual_seed(0)
+    backbone = Backbone(name).eval()
+    x = torch.rand(2, 3, 128, 128)
+    with torch.no_grad():
+        out = backbone(x)
+        for module_name, module in backbone.named_modules():
+            if module_name.endswith(branch_end):  # the branch's last layer: zero it to close the branch
+                module.weight.zero_()
+                module.bias.zero_()
+        closed = backbone(x)
+    assert float((out - closed).norm() / out.norm()) > 0.1

@@ -31,6 +31,21 @@ def _checked_weights(name: str, path: str) -> dict[str, Tensor]:
     return full.state_dict()
 
 
+def open_residual_init(name: str) -> dict[str, object]:
+    """timm arguments that start every residual branch open when training from random init.
+
+    timm zero-initialises the last BN of each ResNet block (`zero_init_last`) and scales each ConvNeXt
+    block by 1e-6 (`ls_init_value`), so a fresh backbone is its stem plus the strided shortcuts: a
+    ~20 px receptive field at stride 32. Measured here: after 780 CPU steps the ResNet gammas were still
+    ~0.01, the branches never opened, and xyz, regions and pose did not learn (docs/posenet.md).
+    """
+    if name.startswith("resnet"):
+        return {"zero_init_last": False}
+    if name.startswith("convnext"):
+        return {"ls_init_value": 1.0}
+    return {}
+
+
 class Backbone(nn.Module):
     """The last (stride-32) feature map of a timm model: 512×8×8 for resnet34, 768×8×8 for convnext_tiny."""
 
@@ -43,6 +58,7 @@ class Backbone(nn.Module):
             pretrained_cfg_overlay=overlay,
             features_only=True,
             out_indices=(-1,),
+            **(open_residual_init(name) if overlay is None else {}),
         )
         self.out_channels: int = self.body.feature_info.channels()[-1]
         if overlay is None and isinstance(getattr(self.body, "stem_1", None), nn.LayerNorm | LayerNorm2d):
