@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from torch import Tensor, nn
 
-from .layers import conv_gn_relu, group_norm, normal_init
+from .layers import conv_gn_relu, group_norm
 
 
 def top_down_decoder(in_channels: int, channels: int) -> nn.Sequential:
@@ -26,6 +26,8 @@ class GeoHead(nn.Module):
     """Decoder, optional feature refinement (AFR), and one shared 1×1 output conv.
 
     Output channels are ordered mask (1), xyz (3), region (num_regions + 1, channel 0 = background).
+    Layers keep PyTorch's default init, not GDR-Net's N(0, 0.001): from a random backbone the tiny init
+    cut the gradient reaching the backbone ~5x and slowed every head (docs/posenet.md).
     """
 
     def __init__(self, in_channels: int, channels: int, num_regions: int, refine: nn.Module | None) -> None:
@@ -33,8 +35,6 @@ class GeoHead(nn.Module):
         self.decoder = top_down_decoder(in_channels, channels)
         self.refine = refine if refine is not None else nn.Identity()
         self.out = nn.Conv2d(channels, 1 + 3 + num_regions + 1, 1)
-        normal_init(self.decoder, std=0.001)
-        normal_init(self.out, std=0.01)
 
     def forward(self, x: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """Return (features before the output conv, mask logits, xyz, region logits)."""

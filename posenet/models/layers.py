@@ -24,12 +24,3 @@ def conv_gn_relu(in_channels: int, out_channels: int, stride: int = 1) -> nn.Seq
 def conv1x1(in_channels: int, out_channels: int) -> nn.Conv2d:
     """Pointwise conv with bias."""
     return nn.Conv2d(in_channels, out_channels, 1)
-
-
-def normal_init(module: nn.Module, std: float) -> None:
-    """GDR-Net init: every conv / linear weight ~ N(0, std²), biases 0."""
-    for m in module.modules():
-        if isinstance(m, nn.Conv2d | nn.ConvTranspose2d | nn.Linear):
-            nn.init.normal_(m.weight, std=std)
-            if m.bias is not None:
-                nn.init.zeros_(m.bias)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from .layers import conv_gn_relu, normal_init
+from .layers import conv_gn_relu
 
 
 class PGSA(nn.Module):
@@ -36,7 +36,10 @@ class PGSA(nn.Module):
 
 
 class PatchPnP(nn.Module):
-    """Three stride-2 conv-GN-ReLU blocks, [PGSA], flatten, FC stack with LeakyReLU, then rot6d and SITE."""
+    """Three stride-2 conv-GN-ReLU blocks, [PGSA], flatten, FC stack with LeakyReLU, then rot6d and SITE.
+
+    PyTorch's default init, as the geometric head (see GeoHead).
+    """
 
     def __init__(
         self,
@@ -61,10 +64,6 @@ class PatchPnP(nn.Module):
         self.fc = nn.Sequential(*fc)
         self.fc_r = nn.Linear(dims[-1], 6)
         self.fc_t = nn.Linear(dims[-1], 3)
-        normal_init(self.encoder, std=0.001)
-        normal_init(self.fc, std=0.001)
-        normal_init(self.fc_r, std=0.01)
-        normal_init(self.fc_t, std=0.01)
 
     def forward(self, x: Tensor) -> tuple[Tensor, Tensor]:
         """Return (rot6d B×6, SITE B×3)."""
