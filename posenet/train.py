@@ -49,6 +49,16 @@ def lr_factor(it: int, total: int, o: OptimConfig) -> float:
     return warm * 0.5 * (1 + math.cos(math.pi * (it - start) / (total - start)))
 
 
+def pin_cpu_threads(threads: int) -> None:
+    """Fix the intra-op thread count (0: one per core) and make torch pick deterministic kernels.
+
+    The float summation order depends on the thread count, and any code in the process may have changed
+    it (e.g. `posenet bench --threads`), so training sets it itself: same config and seed, same losses.
+    """
+    torch.set_num_threads(threads or os.cpu_count() or 1)
+    torch.use_deterministic_algorithms(True, warn_only=True)
+
+
 def worker_init(_: int) -> None:
     """One thread per loader process: the processes themselves are the parallelism."""
     torch.set_num_threads(1)
@@ -63,7 +73,7 @@ def make_optimizer(model: torch.nn.Module, o: OptimConfig, total_iters: int):
         lr=o.lr,
         weight_decay=o.weight_decay,
         betas=RANGER_BETAS,
-        eps=1e-5,
+        eps=o.eps,
         decoupled_weight_decay=True,  # Ranger decays weights directly (p -= lr * wd * p)
     )
     return optimizer, torch.optim.lr_scheduler.LambdaLR(optimizer, lambda it: lr_factor(it, total_iters, o))
@@ -175,7 +185,15 @@ def _train(
     if sampler.steps_per_epoch == 0:
         raise PosenetError(f"{len(dataset)} training samples are fewer than one batch of {o.batch_size}")
     total = o.epochs * sampler.steps_per_epoch
+    if rank == 0 and max_steps is not None and max_steps > total:
+        tqdm.write(
+            f"note: --max-steps {max_steps} exceeds the schedule's {total} steps "
+            f"({o.epochs} epochs x {sampler.steps_per_epoch}); training stops at step {total}. "
+            "Raise --epochs to train longer."
+        )
 
+    if device.type == "cpu":
+        pin_cpu_threads(o.threads)
     torch.manual_seed(o.seed)
     model = build_model(cfg.variant, model_cfg).to(device)
     optimizer, scheduler = make_optimizer(model, o, total)

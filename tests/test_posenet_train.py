@@ -79,6 +79,46 @@ def test_resume_continues_with_the_identical_next_step_loss(
     assert (stopped / "tb").is_dir()
 
 
+def test_same_config_and_seed_give_the_same_losses_whatever_ran_before(
+    dataset_dir: Path, tiny_config: Path, tmp_path: Path
+) -> None:
+    """Training pins its thread count: a caller that changed it (e.g. `posenet bench --threads 1` in the
+    same process) does not change the float summation order, hence not the losses."""
+    before = torch.get_num_threads()
+    runs = []
+    for threads in (before, 1):
+        torch.set_num_threads(threads)
+        run = tmp_path / f"threads{threads}"
+        code, out = posenet(
+            "train", "--data", dataset_dir, "--out", run, "--config", tiny_config, "--max-steps", 4
+        )
+        assert code == 0, out
+        runs.append(losses(run))
+    torch.set_num_threads(before)
+    assert runs[0] == runs[1] and len(runs[0]) == 4
+
+
+def test_a_step_cap_beyond_the_schedule_is_reported(
+    dataset_dir: Path, tiny_config: Path, tmp_path: Path
+) -> None:
+    run = tmp_path / "run"
+    code, out = posenet(
+        "train",
+        "--data",
+        dataset_dir,
+        "--out",
+        run,
+        "--config",
+        tiny_config,
+        "--epochs",
+        "1",
+        "--max-steps",
+        "1000",
+    )
+    steps = len(losses(run))
+    assert code == 0 and f"exceeds the schedule's {steps} steps" in out and steps < 1000
+
+
 def test_ddp_with_gloo_on_two_processes(dataset_dir: Path, tiny_config: Path, tmp_path: Path) -> None:
     out = tmp_path / "ddp"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", "2"]
