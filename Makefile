@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test test-slow lint assets clean
+.PHONY: install demo test lint assets clean
 
 $(STAMP): pyproject.toml
 	@command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ] && ! dpkg -s libllvm19 >/dev/null 2>&1 \
@@ -22,10 +22,7 @@ demo: install
 
 test: install
 	$(BIN)/ruff check .
-	$(BIN)/pytest -q -m "not slow"
-
-test-slow: install  # the long CPU learning run of GAP-GDRNet (about 5 min on 2 idle cores)
-	$(BIN)/pytest -q -m slow
+	$(BIN)/pytest -q
 
 lint: install
 	$(BIN)/ruff check . && $(BIN)/ruff format --check .

@@ -1,30 +1,33 @@
-"""Learning test: a reduced-width network overfits a few rendered images through the real pipeline
-(files -> crops and targets -> losses -> Ranger -> checkpoint -> decode -> ADD), which only works when
-data, targets, losses and pose decoding agree with each other."""
+"""Learning test: the CPU preset as a user gets it (the paper's augmentations and losses) learns geometry
+and pose, not just masks, through the real pipeline (files -> crops and targets -> losses -> Ranger ->
+checkpoint -> decode -> errors).
+
+The failure it guards against: a network that learns the mask (brightness gives it) while xyz sits at the
+best constant prediction and the rotation error stays at a random rotation's ~126 deg. Two minutes of
+2 CPU cores cannot teach a from-scratch network to generalise to held-out scenes, so this test measures
+on the training images; the held-out figures come from `benchmarks/posenet_learning.py` (README).
+"""
 
 from __future__ import annotations
 
-import json
+import dataclasses
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+import torch
 from posenet_helpers import posenet_dataset
 
-from posenet.config import config_from_dict
+from posenet.config import load_config
 from posenet.data import open_split
-from posenet.evaluate import evaluate
+from posenet.evaluate import evaluate, load_model
 from posenet.train import train
 
-FIT = {
-    "preset": "smoke",
-    # 64² input and one hidden FC layer: GDR-Net's tiny init (std 0.001) wakes up in fewer steps
-    "model": {"input_res": 64, "output_res": 16, "fc_dims": [128]},
-    # no augmentation: training crops are the evaluation crops, so the network can memorise them
-    "data": {"workers": 1, "color_prob": 0.0, "bg_prob": 0.0, "dzi_prob": 0.0},
-    "optim": {"batch_size": 7, "warmup_iters": 20, "ckpt_every": 10**6},
-}
-STEPS_PER_EPOCH = 2  # 16 training instances, batches of 7
+STEPS = 300  # at the preset's batch of 8 (about 2 minutes on 2 idle cores)
+# Measured at 300 steps: ratio 0.87, median 49 deg. The failure this guards against gave ~0.97 and ~126 deg.
+MAX_XYZ_RATIO = 0.95
+MAX_MEDIAN_RE_DEG = 90.0
 
 
 @pytest.fixture(scope="module")
@@ -32,36 +35,45 @@ def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return posenet_dataset(tmp_path_factory)
 
 
-@pytest.mark.parametrize(
-    ("variant", "steps", "lr"),
-    [
-        ("gdrnet", 800, 3e-2),
-        pytest.param(
-            "gap-gdrnet",
-            1600,
-            1e-2,
-            marks=pytest.mark.slow,
-        ),
-    ],
-)
-def test_overfits_its_training_images(
-    variant: str, steps: int, lr: float, dataset_dir: Path, tmp_path: Path
-) -> None:
-    optim = {**FIT["optim"], "epochs": steps // STEPS_PER_EPOCH, "lr": lr}
-    cfg = config_from_dict({**FIT, "variant": variant, "optim": optim})
+def xyz_errors(ckpt: Path, data: Path) -> tuple[float, float]:
+    """(network, best constant) mean L1 of normalised xyz over the visible pixels of the training crops.
+
+    The crops are the evaluation crops (no jitter, no augmentation); the best constant is the per-axis
+    median of every visible target, the minimum of an L1 loss that ignores the image.
+    """
+    model, _ = load_model(ckpt, torch.device("cpu"))
+    cfg = load_config("smoke")
+    plain = dataclasses.replace(cfg.data, dzi_prob=0.0, color_prob=0.0, bg_prob=0.0)
+    dataset = open_split(data, "train", plain, model.config, train=True)
+    predicted, target = [], []
+    with torch.inference_mode():
+        for i in range(len(dataset)):
+            item = dataset[i]
+            visible = item["roi_mask_visib"][0] > 0
+            out = model(item["roi_img"][None], item["roi_coord2d"][None])
+            predicted.append(out["xyz"][0][:, visible].T.numpy())
+            target.append(item["roi_xyz"][:, visible].T.numpy())
+    pred, gt = np.concatenate(predicted), np.concatenate(target)
+    constant = np.abs(gt - np.median(gt, axis=0)).sum(1).mean()
+    return float(np.abs(pred - gt).sum(1).mean()), float(constant)
+
+
+def test_the_cpu_preset_learns_geometry_and_pose_not_just_masks(dataset_dir: Path, tmp_path: Path) -> None:
+    cfg = load_config("smoke")
+    instances = open_split(dataset_dir, "train", cfg.data, cfg.model_config(), train=True).instances
+    cfg.optim.epochs = STEPS // (len(instances) // cfg.optim.batch_size)
+    cfg.optim.ckpt_every = cfg.optim.epochs  # one checkpoint, not one per 2-step epoch: learning unchanged
     tic = time.perf_counter()
     ckpt = train(dataset_dir, tmp_path / "run", cfg)
-    rows = [json.loads(line) for line in (tmp_path / "run" / "train_log.jsonl").read_text().splitlines()]
-    trained = open_split(dataset_dir, "train", cfg.data, cfg.model_config(), train=True).instances
-    assert len(trained) // cfg.optim.batch_size == STEPS_PER_EPOCH and len(rows) == steps
-    result = evaluate(dataset_dir, ckpt, "train", image_ids={i.im_id for i in trained}, workers=0)
-    first = sum(r["loss"] for r in rows[:5]) / 5
-    last = sum(r["loss"] for r in rows[-5:]) / 5
-    s = result.summary
+    trained_s = time.perf_counter() - tic
+    network, constant = xyz_errors(ckpt, dataset_dir)
+    result = evaluate(dataset_dir, ckpt, "train", image_ids={i.im_id for i in instances}, workers=0)
+    re = np.array([r["re_deg"] for r in result.records])
     print(
-        f"\n{variant}: {steps} steps in {time.perf_counter() - tic:.0f} s, loss {first:.3f} -> {last:.3f} "
-        f"(x{first / last:.1f}), on {s['n']} training images: ADD@0.1d {s['add_0.1d']:.2f}, "
-        f"re {s['re_deg']:.2f} deg, te {s['te_m']:.4f} m"
+        f"\n{len(instances)} training images, {cfg.optim.epochs} epochs in {trained_s:.0f} s: "
+        f"xyz L1 {network:.3f} vs best constant {constant:.3f} (ratio {network / constant:.2f}, "
+        f"must be <= {MAX_XYZ_RATIO}); rotation error median {np.median(re):.1f} deg "
+        f"(must be <= {MAX_MEDIAN_RE_DEG}; a random rotation: ~126)"
     )
-    assert first / last >= 5.0
-    assert s["n"] == len(trained) and s["add_0.1d"] >= 0.8
+    assert network <= MAX_XYZ_RATIO * constant
+    assert np.median(re) <= MAX_MEDIAN_RE_DEG
