@@ -1,7 +1,8 @@
 """posenet learning benchmark: train a config on an scgen dataset, following the held-out test split.
 
 Reproduce the README figures (renders 1000 samples with Mitsuba at 320x240, seed 7, into OUT/data, then
-trains the `smoke` config for its whole schedule into OUT/run; estimated 1-2 h on a 2-core CPU):
+trains the `smoke` config for its whole schedule into OUT/run; measured on 2 idle cores: about 6 min of
+rendering, 25 min of training and 2 min of evaluation):
 
     python benchmarks/posenet_learning.py --out /tmp/learn
 
