@@ -39,11 +39,11 @@ from typing import Any
 import numpy as np
 
 from posenet.config import TrainConfig, load_config
-from posenet.data import EpochSampler, open_split
+from posenet.data import open_split
 from posenet.errors import PosenetError
 from posenet.evaluate import EvalResult, by_factor, evaluate, format_table
 from posenet.losses import LOSS_TERMS
-from posenet.train import LAST, LOG_FILE, train
+from posenet.train import LAST, LOG_FILE, steps_per_epoch, train
 from scgen.atomic import atomic_write_text
 from scgen.errors import ScgenError
 from scgen.runner import RenderJob, run_render
@@ -144,9 +144,7 @@ def schedule(data: Path, cfg: TrainConfig) -> tuple[int, int, int]:
     """(training instances, steps per epoch, total steps) exactly as posenet.train computes them."""
     o = cfg.optim
     ds = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
-    per_epoch = EpochSampler(len(ds), o.batch_size, 1, 0, o.seed).steps_per_epoch
-    if per_epoch == 0:
-        raise PosenetError(f"{len(ds)} training instances are fewer than one batch of {o.batch_size}")
+    per_epoch = steps_per_epoch(len(ds), o)
     return len(ds), per_epoch, o.epochs * per_epoch
 
 

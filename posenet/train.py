@@ -49,6 +49,14 @@ def lr_factor(it: int, total: int, o: OptimConfig) -> float:
     return warm * 0.5 * (1 + math.cos(math.pi * (it - start) / (total - start)))
 
 
+def steps_per_epoch(n_instances: int, o: OptimConfig, world: int = 1) -> int:
+    """Optimisation steps per epoch over `n_instances` (EpochSampler drops an incomplete global batch)."""
+    steps = EpochSampler(n_instances, o.batch_size // world, world).steps_per_epoch
+    if steps == 0:
+        raise PosenetError(f"{n_instances} training samples are fewer than one batch of {o.batch_size}")
+    return steps
+
+
 def pin_cpu_threads(threads: int) -> None:
     """Fix the intra-op thread count (0: one per core) and make torch pick deterministic kernels.
 
@@ -181,10 +189,8 @@ def _train(
         raise PosenetError(f"{out} already holds a run ({LAST}); pass --resume or choose another --out")
     model_cfg = cfg.model_config()
     dataset = open_split(data, "train", cfg.data, model_cfg, train=True, seed=o.seed)
+    total = o.epochs * steps_per_epoch(len(dataset), o, world)
     sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
-    if sampler.steps_per_epoch == 0:
-        raise PosenetError(f"{len(dataset)} training samples are fewer than one batch of {o.batch_size}")
-    total = o.epochs * sampler.steps_per_epoch
     if rank == 0 and max_steps is not None and max_steps > total:
         tqdm.write(
             f"note: --max-steps {max_steps} exceeds the schedule's {total} steps "

@@ -19,10 +19,10 @@ import pytest
 import torch
 from posenet_helpers import posenet_dataset
 
-from posenet.config import load_config
+from posenet.config import config_from_dict, load_config
 from posenet.data import open_split
 from posenet.evaluate import evaluate, load_model
-from posenet.train import train
+from posenet.train import steps_per_epoch, train
 
 STEPS = 300  # at the preset's batch of 8 (about 2 minutes on 2 idle cores)
 # Measured at 300 steps: ratio 0.87, median 49 deg. The failure this guards against gave ~0.97 and ~126 deg.
@@ -41,9 +41,9 @@ def xyz_errors(ckpt: Path, data: Path) -> tuple[float, float]:
     The crops are the evaluation crops (no jitter, no augmentation); the best constant is the per-axis
     median of every visible target, the minimum of an L1 loss that ignores the image.
     """
-    model, _ = load_model(ckpt, torch.device("cpu"))
-    cfg = load_config("smoke")
-    plain = dataclasses.replace(cfg.data, dzi_prob=0.0, color_prob=0.0, bg_prob=0.0)
+    model, state = load_model(ckpt, torch.device("cpu"))
+    trained = config_from_dict(state["config"]).data
+    plain = dataclasses.replace(trained, dzi_prob=0.0, color_prob=0.0, bg_prob=0.0)
     dataset = open_split(data, "train", plain, model.config, train=True)
     predicted, target = [], []
     with torch.inference_mode():
@@ -61,7 +61,7 @@ def xyz_errors(ckpt: Path, data: Path) -> tuple[float, float]:
 def test_the_cpu_preset_learns_geometry_and_pose_not_just_masks(dataset_dir: Path, tmp_path: Path) -> None:
     cfg = load_config("smoke")
     instances = open_split(dataset_dir, "train", cfg.data, cfg.model_config(), train=True).instances
-    cfg.optim.epochs = STEPS // (len(instances) // cfg.optim.batch_size)
+    cfg.optim.epochs = STEPS // steps_per_epoch(len(instances), cfg.optim)
     cfg.optim.ckpt_every = cfg.optim.epochs  # one checkpoint, not one per 2-step epoch: learning unchanged
     tic = time.perf_counter()
     ckpt = train(dataset_dir, tmp_path / "run", cfg)

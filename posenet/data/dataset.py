@@ -163,14 +163,13 @@ def open_split(
     """The Dataset of one split of the dataset folder `root` (every check of the folder happens here).
 
     Both modes keep every instance with a visible pixel, restricted to `image_ids` when given; training
-    also drops instances visible by no more than `min_visib_fract` when that is above 0 (GDR-Net used
-    0.3), so with 0 it trains on every instance evaluation scores.
+    also drops instances visible by no more than `min_visib_fract` (GDR-Net used 0.3), so with the
+    default 0 it trains on every instance evaluation scores.
     """
     obj = load_object_model(root, cfg.obj_id, model_cfg.num_regions, cfg.num_pm_points)
     instances = [i for i in scan_split(root, split, cfg.obj_id) if i.px_count_visib > 0]
     if train:
-        if cfg.min_visib_fract > 0:
-            instances = [i for i in instances if i.visib_fract > cfg.min_visib_fract]
+        instances = [i for i in instances if i.visib_fract > cfg.min_visib_fract]
         missing = [p for i in instances for p in (i.xyz, i.mask, i.mask_visib) if not p.is_file()]
         if missing:
             raise PosenetError(f"missing xyz maps or masks ({len(missing)} file(s)), e.g. {missing[0]}")
