@@ -18,7 +18,7 @@ from posenet.evaluate import evaluate, format_table
 from posenet.train import train as run_train
 from posenet.viz import viz
 from scgen.atomic import atomic_write_text
-from scgen.errors import one_line_errors
+from scgen.cli_errors import one_line_errors
 
 PATH = click.Path(path_type=Path)
 

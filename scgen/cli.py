@@ -8,8 +8,8 @@ from pathlib import Path
 
 import click
 
-from scgen.errors import ScgenError, one_line_errors
-from scgen.preview import preview
+from scgen.cli_errors import one_line_errors
+from scgen.errors import ScgenError
 
 
 def parse_resolution(text: str | None) -> tuple[int, int] | None:
@@ -235,8 +235,27 @@ def merge(out: Path, shards: tuple[Path, ...]) -> None:
     click.echo(f"{out}: {n}/{total} samples after merging {len(shards)} shard folder(s)")
 
 
+@main.command()
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for preview.png.")
+@click.option("--n", "n", type=int, default=16, show_default=True, help="Number of samples (ids 0..n-1).")
+@click.option("--backend", default="blender", show_default=True, help="Renderer: blender or mitsuba.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Dataset seed (same samples as render).")
+@click.option("--resolution", default="320x240", show_default=True, help="Image size WxH.")
+@click.option("--quality", default="draft", show_default=True, help="draft | default | high.")
+@click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,
+              help="Sampling config file (see docs/config.md).")  # fmt: skip
+@one_line_errors(ScgenError)
+def preview(out: Path, n: int, backend: str, seed: int, resolution: str, quality: str, config_path) -> None:
+    """Render n samples in memory and write OUT/preview.png: RGB, masks, xyz and factor labels."""
+    from scgen.preview import build_preview, save_png
+
+    if n <= 0:
+        raise ScgenError(f"--n must be a positive number of samples, got {n}")
+    sheet = build_preview(n, seed, backend, parse_resolution(resolution), quality, config_path)
+    path = Path(out) / "preview.png"
+    save_png(sheet, path)
+    click.echo(f"wrote {path} ({n} samples, {backend})")
+
+
 if __name__ == "__main__":
     main()
-
-
-main.add_command(preview)

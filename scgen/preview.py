@@ -9,13 +9,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import click
 import cv2
 import numpy as np
 from PIL import Image
 
 from scgen.annotate import Annotation, annotate
-from scgen.errors import ScgenError
 from scgen.scenes.spec import SceneSpec
 
 TILE_W = 320  # width of a sample's RGB tile in the sheet; the three label panels share it
@@ -131,27 +129,3 @@ def build_preview(
     finally:
         backend.close()
     return contact_sheet(tiles)
-
-
-@click.command()
-@click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for preview.png.")
-@click.option("--n", "n", type=int, default=16, show_default=True, help="Number of samples (ids 0..n-1).")
-@click.option("--backend", default="blender", show_default=True, help="Renderer: blender or mitsuba.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Dataset seed (same samples as render).")
-@click.option("--resolution", default="320x240", show_default=True, help="Image size WxH.")
-@click.option("--quality", default="draft", show_default=True, help="draft | default | high.")
-@click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,
-              help="Sampling config file (see docs/config.md).")  # fmt: skip
-def preview(out: Path, n: int, backend: str, seed: int, resolution: str, quality: str, config_path) -> None:
-    """Render n samples in memory and write OUT/preview.png: RGB, masks, xyz and factor labels."""
-    from scgen.cli import parse_resolution
-
-    try:
-        if n <= 0:
-            raise ScgenError(f"--n must be a positive number of samples, got {n}")
-        sheet = build_preview(n, seed, backend, parse_resolution(resolution), quality, config_path)
-    except ScgenError as exc:
-        raise click.ClickException(str(exc)) from None
-    path = Path(out) / "preview.png"
-    save_png(sheet, path)
-    click.echo(f"wrote {path} ({n} samples, {backend})")

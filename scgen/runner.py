@@ -21,7 +21,7 @@ from scgen.dataset import FORMAT, MANIFEST, Layout, dumps, read_json
 from scgen.errors import ScgenError
 from scgen.executors import run_local, run_ray
 from scgen.model import TargetModel, load_target, write_model_dir
-from scgen.render.base import BACKENDS, create_backend
+from scgen.render.base import check_backend
 from scgen.scenes import load_config, sample_scene
 from scgen.scenes.silhouette import TargetShape
 from scgen.scenes.spec import SceneSpec
@@ -72,8 +72,7 @@ def validate_job(job: RenderJob) -> None:
     """Checks that need no heavy work; raise ScgenError naming the bad value."""
     if job.n <= 0:
         raise ScgenError(f"--n must be a positive number of samples, got {job.n}")
-    if job.backend not in BACKENDS:
-        raise ScgenError(f"unknown backend '{job.backend}' (choose from {', '.join(BACKENDS)})")
+    check_backend(job.backend, job.device)  # the renderer can start here (builds none)
     if job.quality not in QUALITIES:
         raise ScgenError(f"unknown quality '{job.quality}' (choose from {', '.join(QUALITIES)})")
     if job.workers <= 0:
@@ -184,8 +183,6 @@ def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
     """Render the job's missing samples and finalize; returns a summary with timings."""
     validate_job(job)
     plan = make_plan(job)
-    # fail fast (before writing anything) when the renderer cannot start, e.g. bpy missing
-    create_backend(job.backend, plan.model, quality=job.quality, device=job.device).close()
     layout = prepare_output(job, plan)
     done = existing_sample_ids(layout)
     tasks = [

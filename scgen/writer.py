@@ -19,9 +19,9 @@ import numpy as np
 
 from scgen.annotate import Annotation
 from scgen.atomic import atomic_write_bytes, atomic_write_text
+from scgen.buffers import Buffers
 from scgen.dataset import CHUNK, Layout, dumps, read_json
 from scgen.exr import encode_xyz_exr
-from scgen.render.base import Buffers
 from scgen.scenes.geometry import matrix_to_quat
 from scgen.scenes.spec import SceneSpec
 from scgen.splits import combination_key, viewpoint_cell

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 import trimesh
 
+from scgen.buffers import TARGET_ID
 from scgen.errors import ScgenError
 from scgen.model import load_target, normalise_parts
 from scgen.render.backgrounds import srgb_to_linear
-from scgen.render.base import TARGET_ID, create_backend
+from scgen.render.base import create_backend
 from scgen.render.blender import BlenderBackend
 from scgen.render.blender_env import import_bpy, select_device
 from scgen.render.lighting import exposure_scale, sun_render_irradiance

@@ -13,8 +13,8 @@ import pytest
 import trimesh
 
 from scgen.annotate.annotate import annotate
+from scgen.buffers import TARGET_ID
 from scgen.model import load_target
-from scgen.render.base import TARGET_ID
 from scgen.render.blender import BlenderBackend
 from scgen.render.mitsuba_backend import MitsubaBackend
 from scgen.scenes import load_config, sample_scene

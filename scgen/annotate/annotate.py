@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scgen.render.base import TARGET_ID, Buffers
+from scgen.buffers import TARGET_ID, Buffers
 from scgen.scenes.spec import SceneSpec
 
 SHADOW_THRESHOLD = 0.05  # shadow label "yes" when >= 5 % of the lit, visible target is in cast shadow

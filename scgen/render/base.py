@@ -2,36 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import importlib.util
 from typing import Protocol
 
-import numpy as np
-
+from scgen.buffers import Buffers
 from scgen.errors import ScgenError
 from scgen.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
-BACKGROUND_ID = 0
-TARGET_ID = 1  # props get ids 2, 3, ... in SceneSpec.props order
 BACKENDS = ("blender", "mitsuba")
-
-
-@dataclass
-class Buffers:
-    """Per-pixel renderer output, all H x W, OpenCV pixel-centre convention.
-
-    depth / target_depth: z along the optical axis in metres, 0 where nothing is hit.
-    instance: BACKGROUND_ID, TARGET_ID, or 2 + index into SceneSpec.props.
-    normal: camera-frame unit normal facing the camera (zeros on background).
-    sun_blocked: the ray from the visible surface towards the sun hits a non-target object.
-    """
-
-    rgb: np.ndarray  # uint8 H x W x 3 (sRGB)
-    depth: np.ndarray  # float32
-    instance: np.ndarray  # int32
-    target_depth: np.ndarray  # float32, the target rendered alone (for the full mask)
-    normal: np.ndarray  # float32 H x W x 3
-    sun_blocked: np.ndarray  # bool
 
 
 class Backend(Protocol):
@@ -44,6 +23,25 @@ class Backend(Protocol):
     def close(self) -> None: ...
 
 
+def check_backend(name: str, device: str = "auto") -> None:
+    """Fail fast, before anything is written, when a backend cannot run here; builds no renderer.
+
+    Only `--device gpu` imports bpy (to ask Cycles for a GPU); otherwise the modules are only located.
+    """
+    if name == "mitsuba":
+        if importlib.util.find_spec("mitsuba") is None:
+            raise ScgenError("the mitsuba backend needs the mitsuba package: pip install mitsuba")
+    elif name == "blender":
+        from scgen.render.blender_env import check_bpy, check_device, import_bpy, select_device
+
+        check_bpy()
+        check_device(device)
+        if device == "gpu":
+            select_device(import_bpy(), device)
+    else:
+        raise ScgenError(f"unknown backend '{name}' (choose from {', '.join(BACKENDS)})")
+
+
 def create_backend(
     name: str, model: TargetModel, quality: str = "default", device: str = "auto", threads: int | None = None
 ) -> Backend:
@@ -51,12 +49,11 @@ def create_backend(
 
     `threads` caps the renderer's CPU threads (several workers share the cores); None = all cores.
     """
+    check_backend(name, device)
     if name == "mitsuba":
         from scgen.render.mitsuba_backend import MitsubaBackend
 
         return MitsubaBackend(model, quality=quality, threads=threads)
-    if name == "blender":
-        from scgen.render.blender import BlenderBackend
+    from scgen.render.blender import BlenderBackend
 
-        return BlenderBackend(model, quality=quality, device=device, threads=threads)
-    raise ScgenError(f"unknown backend '{name}' (choose from {', '.join(BACKENDS)})")
+    return BlenderBackend(model, quality=quality, device=device, threads=threads)

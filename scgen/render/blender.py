@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from scgen.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.model import TargetModel
 from scgen.render.backgrounds import background_image, linear_to_srgb8
-from scgen.render.base import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.blender_env import import_bpy, select_device
 from scgen.render.blender_scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender_settings import preset

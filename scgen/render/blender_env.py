@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import os
 import re
 import sys
@@ -20,28 +21,41 @@ DEVICES = ("auto", "cpu", "gpu")
 BLENDER_SCRIPTS = re.compile(r"[/\\]bpy[/\\]\d+\.\d+[/\\]scripts([/\\]|$)")
 
 
-def import_bpy() -> ModuleType:
-    """The bpy module, or a ScgenError saying why it cannot be used here."""
+def check_bpy() -> None:
+    """Raise a ScgenError when bpy cannot be imported here, without importing it (about 1 s, 300 MB)."""
     if sys.version_info[:2] != BPY_PYTHON:
         raise ScgenError(
             f"the blender backend needs bpy, which supports Python {BPY_PYTHON[0]}.{BPY_PYTHON[1]} only "
             f"(this is {sys.version_info[0]}.{sys.version_info[1]}); use a 3.11 venv or --backend mitsuba"
         )
+    if "bpy" not in sys.modules and importlib.util.find_spec("bpy") is None:
+        raise ScgenError(_missing("No module named 'bpy'"))
+
+
+def import_bpy() -> ModuleType:
+    """The bpy module, or a ScgenError saying why it cannot be used here."""
+    check_bpy()
     if "bpy" not in sys.modules:
         sys.path[:] = [p for p in sys.path if not BLENDER_SCRIPTS.search(p)]
     try:
         import bpy
     except ImportError as exc:
-        raise ScgenError(
-            f"the blender backend needs bpy ({exc}): pip install bpy==5.0.1, or use --backend mitsuba"
-        ) from exc
+        raise ScgenError(_missing(str(exc))) from exc
     return bpy
+
+
+def _missing(reason: str) -> str:
+    return f"the blender backend needs bpy ({reason}): pip install bpy==5.0.1, or use --backend mitsuba"
+
+
+def check_device(device: str) -> None:
+    if device not in DEVICES:
+        raise ScgenError(f"unknown device '{device}' (choose from {', '.join(DEVICES)})")
 
 
 def select_device(bpy: ModuleType, device: str) -> str:
     """Enable the Cycles compute device for `device` (auto|cpu|gpu); returns 'CPU' or the GPU API used."""
-    if device not in DEVICES:
-        raise ScgenError(f"unknown device '{device}' (choose from {', '.join(DEVICES)})")
+    check_device(device)
     prefs = bpy.context.preferences.addons["cycles"].preferences
     if device != "cpu":
         with quiet_stdout():  # Cycles prints a warning for every GPU library it fails to open

@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 import OpenEXR
 
+from scgen.buffers import TARGET_ID
 from scgen.model import TargetModel
-from scgen.render.base import TARGET_ID
 from scgen.render.blender_env import quiet_stdout
 from scgen.render.blender_frames import camera_matrix_world, intrinsics_from_K, light_matrix_world
 from scgen.render.blender_materials import build_materials, probe_material

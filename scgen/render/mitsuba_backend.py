@@ -13,9 +13,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from scgen.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.model import TargetModel
 from scgen.render.backgrounds import background_image, linear_to_srgb8
-from scgen.render.base import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_materials import box_uv, build_bsdfs, texture_scale
 from scgen.render.props import prop_mesh

@@ -100,11 +100,39 @@ def _merge(base: dict[str, Any], override: dict[str, Any], prefix: str = "") -> 
                 raise ScgenError(f"config key '{name}' must be a table")
             _merge(base[key], value, name + ".")
         elif isinstance(base[key], dict):
-            if not isinstance(value, dict) or set(value) - set(base[key]):
-                raise ScgenError(f"config key '{name}' must map {sorted(base[key])} to numbers")
+            if (
+                not isinstance(value, dict)
+                or set(value) - set(base[key])
+                or not all(map(_is_number, value.values()))
+            ):
+                raise ScgenError(
+                    f"config key '{name}' must map {sorted(base[key])} to numbers, got {value!r}"
+                )
             base[key] = {k: float(value.get(k, 0.0)) for k in base[key]}
         else:
+            _check_type(name, base[key], value)
             base[key] = value
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _check_type(name: str, default: Any, value: Any) -> None:
+    """A value must have its default's kind (number, list, flag); a None default takes any of them."""
+    if default is None:
+        return
+    kinds = ((bool, "true or false"), (list, "a list"), ((int, float), "a number"), (str, "a string"))
+    for kind, label in kinds:
+        if isinstance(default, kind):
+            ok = (
+                isinstance(value, bool)
+                if kind is bool
+                else isinstance(value, kind) and not isinstance(value, bool)
+            )
+            if not ok:
+                raise ScgenError(f"config key '{name}' must be {label}, got {value!r}")
+            return
 
 
 def _is_label_map(d: dict[str, Any]) -> bool:
@@ -172,8 +200,10 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
         raise ScgenError(f"camera focal lengths must be positive, got fx={cam['fx']} fy={cam['fy']}")
     if cam["fx"] != cam["fy"]:  # neither renderer models non-square pixels exactly (Blender 5.0 EXR, Mitsuba)
         raise ScgenError(f"camera.fx and camera.fy must be equal (square pixels): {cam['fx']} vs {cam['fy']}")
-    cam["cx"] = (cam["width"] - 1) / 2 if cam["cx"] is None else float(cam["cx"])
-    cam["cy"] = (cam["height"] - 1) / 2 if cam["cy"] is None else float(cam["cy"])
+    for key, size in (("cx", "width"), ("cy", "height")):
+        if cam[key] is not None and not _is_number(cam[key]):
+            raise ScgenError(f"camera.{key} must be a number, got {cam[key]!r}")
+        cam[key] = (cam[size] - 1) / 2 if cam[key] is None else float(cam[key])
 
     dist = cfg["distance"]
     if dist["range_m"] is None:

@@ -1,0 +1,32 @@
+"""What a renderer returns for one scene: per-pixel buffers and the instance-id convention.
+
+A neutral module: renderers produce Buffers, annotate and the writer consume them, and neither side
+needs to import the other.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+BACKGROUND_ID = 0
+TARGET_ID = 1  # props get ids 2, 3, ... in SceneSpec.props order
+
+
+@dataclass
+class Buffers:
+    """Per-pixel renderer output, all H x W, OpenCV pixel-centre convention.
+
+    depth / target_depth: z along the optical axis in metres, 0 where nothing is hit.
+    instance: BACKGROUND_ID, TARGET_ID, or 2 + index into SceneSpec.props.
+    normal: camera-frame unit normal facing the camera (zeros on background).
+    sun_blocked: the ray from the visible surface towards the sun hits a non-target object.
+    """
+
+    rgb: np.ndarray  # uint8 H x W x 3 (sRGB)
+    depth: np.ndarray  # float32
+    instance: np.ndarray  # int32
+    target_depth: np.ndarray  # float32, the target rendered alone (for the full mask)
+    normal: np.ndarray  # float32 H x W x 3
+    sun_blocked: np.ndarray  # bool
