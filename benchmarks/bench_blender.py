@@ -22,10 +22,11 @@ import numpy as np
 
 from scgen.annotate import annotate
 from scgen.dataset import Layout
+from scgen.generator import Generator
 from scgen.model import TargetModel, load_target
 from scgen.render.blender import BlenderBackend
 from scgen.render.blender_settings import PRESETS, QualityPreset, configure_beauty
-from scgen.scenes import load_config, sample_scene
+from scgen.scenes import load_config
 from scgen.scenes.spec import SceneSpec
 from scgen.writer import WriteOptions, write_sample
 
@@ -127,7 +128,8 @@ def main() -> None:
     model = load_target()
     cfg = load_config(resolution=tuple(args.resolution))
     n = max(args.frames, args.naive_frames, args.preset_frames)
-    specs = [sample_scene(args.seed, i, cfg, model.diameter) for i in range(n)]
+    generator = Generator(model, cfg, args.seed)
+    specs = [generator.scene(i) for i in range(n)]
     width, height = args.resolution
     print(f"{model.name}: {len(model.mesh.faces)} triangles, {width}x{height}, {PRESETS[args.quality]}")
 

@@ -14,12 +14,14 @@ import trimesh
 
 from scgen.annotate import annotate
 from scgen.dataset import Layout
+from scgen.factors import spec_key
+from scgen.generator import Generator
 from scgen.model import load_target
 from scgen.render.base import create_backend
-from scgen.scenes import load_config, sample_scene
+from scgen.scenes import load_config
 from scgen.splits import plan_splits
 from scgen.validate import reprojection_error
-from scgen.writer import WriteOptions, finalize, spec_key, write_sample
+from scgen.writer import WriteOptions, finalize, write_sample
 
 
 def main() -> None:
@@ -31,7 +33,8 @@ def main() -> None:
     out = args.out or Path(tempfile.mkdtemp()) / "bench"
     model, cfg = load_target(), load_config()
     backend = create_backend("mitsuba", model, quality=args.quality)
-    specs = [sample_scene(0, i, cfg, model.diameter) for i in range(args.n)]
+    generator = Generator(model, cfg, 0)
+    specs = [generator.scene(i) for i in range(args.n)]
     splits = plan_splits([spec_key(s) for s in specs], (0.7, 0.1, 0.2), 0)
     layout = Layout(out)
     surface = trimesh.proximity.ProximityQuery(model.mesh)

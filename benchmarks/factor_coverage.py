@@ -22,22 +22,19 @@ from collections import Counter
 import numpy as np
 
 from scgen.annotate import annotate
-from scgen.model import load_target
+from scgen.factors import FACTOR_GROUPS, distance_groups
+from scgen.generator import Generator
 from scgen.render.lighting import mean_luminance
 from scgen.render.mitsuba_backend import MitsubaBackend
-from scgen.scenes import load_config, sample_scene
-from scgen.scenes.silhouette import TargetShape
-from scgen.stats import FACTOR_GROUPS, distance_groups
 
 MIN_SHARE = {"shadow": 0.30}  # every other factor: 0.15
 
 
 def coverage(n: int, seed: int) -> None:
-    model = load_target()
-    shape = TargetShape.from_mesh(model.mesh)
-    cfg = load_config()
+    generator = Generator.load(seed=seed)
+    model, cfg = generator.model, generator.cfg
     t0 = time.perf_counter()
-    specs = [sample_scene(seed, i, cfg, model.diameter, shape) for i in range(n)]
+    specs = [generator.scene(i) for i in range(n)]
     t_sample = (time.perf_counter() - t0) / n
     backend = MitsubaBackend(model, quality="draft")
     t0 = time.perf_counter()
@@ -73,17 +70,14 @@ def coverage(n: int, seed: int) -> None:
 
 
 def luminance(n: int, seed: int) -> None:
-    model = load_target()
-    shape = TargetShape.from_mesh(model.mesh)
-    cfg = load_config(resolution=(320, 240))
-    backend = MitsubaBackend(model, quality="draft")
+    generator = Generator.load(seed=seed, resolution=(320, 240), backend="mitsuba", quality="draft")
+    cfg = generator.cfg
     per_level: dict[str, list[float]] = {level: [] for level in FACTOR_GROUPS["illumination"]}
     for i in range(n):
-        spec = sample_scene(seed, i, cfg, model.diameter, shape)
-        buffers = backend.render(spec)
-        ann = annotate(spec, buffers)
+        sample = generator.sample(i)
+        ann = sample.annotation
         if ann.px_count_visib >= 20:  # a few pixels say nothing about brightness
-            per_level[spec.sun.level].append(mean_luminance(buffers.rgb, ann.mask_visib))
+            per_level[sample.spec.sun.level].append(mean_luminance(sample.buffers.rgb, ann.mask_visib))
     mult = cfg["illumination"]["multipliers"]
     print(f"\nmean target luminance (linear, 1 = white) per level, {n} samples at 320x240, "
           f"exposure EV {cfg['camera']['exposure_ev']:+.1f}")  # fmt: skip

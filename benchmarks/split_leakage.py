@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import argparse
 
+from scgen.factors import spec_key
+from scgen.generator import Generator
 from scgen.model import load_target
-from scgen.scenes import load_config, sample_scene
+from scgen.scenes import load_config
 from scgen.splits import SPLITS, leakage, plan_splits
-from scgen.writer import spec_key
 
 
 def main() -> None:
@@ -18,12 +19,13 @@ def main() -> None:
     ap.add_argument("--n", type=int, nargs="+", default=[1000, 5000])
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
-    cfg, diameter = load_config(), load_target().diameter
+    cfg, model = load_config(), load_target()
     ratios = (0.7, 0.1, 0.2)
     head = f"{'n':>6} {'mode':<8} {'combos':>7} {'train/val/test %':>20} {'max dev pp':>10}"
     print(head + "  shared keys (tr-va, tr-te, va-te)")
     for n in args.n:
-        keys = [spec_key(sample_scene(args.seed, i, cfg, diameter)) for i in range(n)]
+        generator = Generator(model, cfg, args.seed)
+        keys = [spec_key(generator.scene(i)) for i in range(n)]
         for mode in ("factors", "random"):
             split_of = plan_splits(keys, ratios, args.seed, mode)
             shares = [100 * split_of.count(s) / n for s in SPLITS]

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -28,6 +30,25 @@ def parse_shard(text: str) -> tuple[int, int]:
     return int(m.group(1)), int(m.group(2))
 
 
+def scene_options(command: Callable[..., Any]) -> Callable[..., Any]:
+    """The options render and preview share: which renderer, seed, target mesh and sampling config."""
+    options = [
+        click.option("--backend", default="blender", show_default=True,
+                     help="Renderer: blender (Cycles) or mitsuba."),
+        click.option("--seed", type=int, default=0, show_default=True,
+                     help="Dataset seed: sample i of seed s never changes."),
+        click.option("--model", "model_path", type=click.Path(path_type=Path), default=None,
+                     help="Target mesh (OBJ/PLY/GLB/STL); default: the bundled spacecraft."),
+        click.option("--keep-scale", is_flag=True,
+                     help="Keep the mesh's own scale (metres) instead of a 0.2 m diameter."),
+        click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,
+                     help="TOML/YAML file overriding any sampling distribution (see docs/config.md)."),
+    ]  # fmt: skip
+    for option in reversed(options):
+        command = option(command)
+    return command
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="scgen")
 def main() -> None:
@@ -39,29 +60,7 @@ def main() -> None:
 @click.option(
     "--out", type=click.Path(path_type=Path), required=True, help="Dataset folder (created or resumed)."
 )
-@click.option(
-    "--backend", default="blender", show_default=True, help="Renderer: blender (Cycles) or mitsuba."
-)
-@click.option(
-    "--seed", type=int, default=0, show_default=True, help="Dataset seed: sample i of seed s never changes."
-)
-@click.option(
-    "--model",
-    "model_path",
-    type=click.Path(path_type=Path),
-    default=None,
-    help="Target mesh (OBJ/PLY/GLB/STL); default: the bundled spacecraft.",
-)
-@click.option(
-    "--keep-scale", is_flag=True, help="Keep the mesh's own scale (metres) instead of a 0.2 m diameter."
-)
-@click.option(
-    "--config",
-    "config_path",
-    type=click.Path(path_type=Path),
-    default=None,
-    help="TOML/YAML file overriding any sampling distribution (see docs/config.md).",
-)
+@scene_options
 @click.option(
     "--backgrounds",
     "backgrounds_dir",
@@ -238,22 +237,32 @@ def merge(out: Path, shards: tuple[Path, ...]) -> None:
 @main.command()
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for preview.png.")
 @click.option("--n", "n", type=int, default=16, show_default=True, help="Number of samples (ids 0..n-1).")
-@click.option("--backend", default="blender", show_default=True, help="Renderer: blender or mitsuba.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Dataset seed (same samples as render).")
+@scene_options
 @click.option("--resolution", default="320x240", show_default=True, help="Image size WxH.")
 @click.option("--quality", default="draft", show_default=True, help="draft | default | high.")
-@click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,
-              help="Sampling config file (see docs/config.md).")  # fmt: skip
 @one_line_errors(ScgenError)
-def preview(out: Path, n: int, backend: str, seed: int, resolution: str, quality: str, config_path) -> None:
-    """Render n samples in memory and write OUT/preview.png: RGB, masks, xyz and factor labels."""
+def preview(out, n, backend, seed, model_path, keep_scale, config_path, resolution, quality) -> None:
+    """Render n samples in memory, as render would, and write OUT/preview.png: RGB, masks, xyz, factors."""
+    from scgen.generator import Generator
     from scgen.preview import build_preview, save_png
+    from scgen.render.base import check_backend
+    from scgen.render.conventions import check_quality
 
     if n <= 0:
         raise ScgenError(f"--n must be a positive number of samples, got {n}")
-    sheet = build_preview(n, seed, backend, parse_resolution(resolution), quality, config_path)
+    check_quality(quality)
+    check_backend(backend)
+    generator = Generator.load(
+        model_path,
+        config_path,
+        seed,
+        parse_resolution(resolution),
+        keep_scale,
+        backend=backend,
+        quality=quality,
+    )
     path = Path(out) / "preview.png"
-    save_png(sheet, path)
+    save_png(build_preview(generator, n), path)
     click.echo(f"wrote {path} ({n} samples, {backend})")
 
 

@@ -8,11 +8,15 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from scgen import bop
+from scgen.bop import read_json
 from scgen.errors import ScgenError
 
 MANIFEST = "scgen.json"
 FORMAT = "scgen-bop/1"
-CHUNK = 1000  # samples per BOP scene folder: scene_id = sample_id // CHUNK
+CHUNK = 1000  # samples per BOP scene folder: scene_id = sample_id // CHUNK; im_id = sample_id
+OBJ_ID = 1  # the target's BOP object id
+TARGET_INSTANCE = 0  # the target is the only annotated instance of each image
 
 
 class Layout:
@@ -22,20 +26,27 @@ class Layout:
         self.root = Path(root)
 
     def chunk_dir(self, split: str, sample_id: int) -> Path:
-        return self.root / split / f"{sample_id // CHUNK:06d}"
+        return bop.scene_dir(self.root, split, sample_id // CHUNK)
 
     def rgb(self, split: str, sample_id: int, ext: str = "png") -> Path:
-        return self.chunk_dir(split, sample_id) / "rgb" / f"{sample_id:06d}.{ext}"
+        return bop.rgb_path(self.chunk_dir(split, sample_id), sample_id, ext)
 
     def mask(self, split: str, sample_id: int, visib: bool = False) -> Path:
-        sub = "mask_visib" if visib else "mask"
-        return self.chunk_dir(split, sample_id) / sub / f"{sample_id:06d}_000000.png"
+        return bop.mask_path(self.chunk_dir(split, sample_id), sample_id, TARGET_INSTANCE, visib)
 
     def xyz(self, split: str, sample_id: int) -> Path:
-        return self.chunk_dir(split, sample_id) / "xyz" / f"{sample_id:06d}_000000.exr"
+        return bop.xyz_path(self.chunk_dir(split, sample_id), sample_id, TARGET_INSTANCE)
 
     def depth(self, split: str, sample_id: int) -> Path:
-        return self.chunk_dir(split, sample_id) / "depth" / f"{sample_id:06d}.png"
+        return bop.depth_path(self.chunk_dir(split, sample_id), sample_id)
+
+    @property
+    def camera_path(self) -> Path:
+        return self.root / bop.CAMERA_FILE
+
+    @property
+    def models_dir(self) -> Path:
+        return self.root / bop.MODELS_DIR
 
     def record(self, split: str, sample_id: int) -> Path:
         return self.chunk_dir(split, sample_id) / "records" / f"{sample_id:06d}.json"
@@ -56,10 +67,6 @@ class Layout:
         yield from sorted(self.root.glob("*/[0-9]*/records/[0-9]*.json"))
 
 
-def read_json(path: Path) -> Any:
-    return json.loads(path.read_text())
-
-
 def dumps(obj: Any) -> str:
     """Canonical JSON (sorted keys, fixed indent) so identical content gives identical bytes."""
     return json.dumps(obj, indent=1, sort_keys=True) + "\n"
@@ -72,10 +79,7 @@ def open_dataset(root: str | Path) -> tuple[Layout, dict[str, Any]]:
         raise ScgenError(f"not a dataset folder: {root} does not exist or is not a directory")
     if not layout.manifest_path.is_file():
         raise ScgenError(f"not a dataset folder: {root} has no {MANIFEST} (make one with `scgen render`)")
-    try:
-        manifest = read_json(layout.manifest_path)
-    except json.JSONDecodeError as exc:
-        raise ScgenError(f"corrupt manifest {layout.manifest_path}: {exc}") from exc
+    manifest = read_json(layout.manifest_path)
     if manifest.get("format") != FORMAT:
         raise ScgenError(f"unsupported dataset format {manifest.get('format')!r} in {layout.manifest_path}")
     return layout, manifest

@@ -53,23 +53,30 @@ def _drain(pool: ProcessPoolExecutor, pending: list[Task], attempts: dict[int, i
     running: dict[Future, Task] = {}
     while queue or running:
         while queue and len(running) < 2 * workers:
+            try:
+                fut = pool.submit(_run_in_process, queue[-1])
+            except BrokenProcessPool:  # a worker died since the last wait: the pool takes nothing more
+                return _after_crash(list(running.values()), queue, attempts)
             task = queue.pop()
             attempts[task.index] += 1
-            running[pool.submit(_run_in_process, task)] = task
+            running[fut] = task
         finished, _ = wait(running, return_when=FIRST_COMPLETED)
         for fut in finished:
             task = running.pop(fut)
             try:
                 on_done(fut.result())
             except BrokenProcessPool:
-                # a worker died (segfault, OOM kill): every in-flight sample is retried in a new pool
-                retry = [task, *running.values(), *reversed(queue)]
-                _check_attempts(retry, attempts, "its worker process died")
-                return retry
+                return _after_crash([task, *running.values()], queue, attempts)
             except Exception as exc:  # the renderer raised on this sample: retry it in place
                 _check_attempts([task], attempts, f"{type(exc).__name__}: {exc}")
                 queue.append(task)
     return []
+
+
+def _after_crash(in_flight: list[Task], queue: list[Task], attempts: dict[int, int]) -> list[Task]:
+    """A worker died (segfault, OOM kill): every in-flight and queued sample is retried in a new pool."""
+    _check_attempts(in_flight, attempts, "its worker process died")
+    return [*in_flight, *reversed(queue)]
 
 
 def _check_attempts(tasks: Iterable[Task], attempts: dict[int, int], reason: str) -> None:

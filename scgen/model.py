@@ -14,17 +14,10 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from scgen import bop
 from scgen.errors import ScgenError
+from scgen.materials import MATERIALS
 
-MATERIALS = ("mli_gold", "mli_silver", "solar_cell", "white_paint", "brushed_metal", "dark_metal")
-MATERIAL_COLOURS = {  # sRGB vertex colours in the BOP PLY, for viewers and the BOP toolkit
-    "mli_gold": (212, 160, 60),
-    "mli_silver": (200, 200, 205),
-    "solar_cell": (30, 40, 90),
-    "white_paint": (235, 235, 230),
-    "brushed_metal": (160, 160, 165),
-    "dark_metal": (60, 60, 65),
-}
 _MATERIAL_KEYWORDS = (
     ("gold", "mli_gold"),
     ("mli", "mli_silver"),
@@ -42,7 +35,6 @@ _MATERIAL_KEYWORDS = (
 )
 DEFAULT_DIAMETER_M = 0.2
 PARTS_FILE = "parts.glb"
-BOP_MODEL_FILE = "obj_000001.ply"
 
 
 @dataclass
@@ -146,25 +138,8 @@ def load_target(path: str | Path | None = None, keep_scale: bool = False) -> Tar
     return normalise_parts(load_mesh_parts(path), None if keep_scale else DEFAULT_DIAMETER_M, name=path.stem)
 
 
-def models_info(model: TargetModel) -> dict[str, dict[str, float]]:
-    """BOP models_info.json content (millimetres) for object id 1."""
-    lo, hi = model.mesh.bounds * 1000.0
-    size = hi - lo
-    return {
-        "1": {
-            "diameter": model.diameter * 1000.0,
-            "min_x": lo[0],
-            "min_y": lo[1],
-            "min_z": lo[2],
-            "size_x": size[0],
-            "size_y": size[1],
-            "size_z": size[2],
-        }
-    }
-
-
-def write_model_dir(model: TargetModel, out: Path) -> None:
-    """Write parts.glb (metres, named materials), obj_000001.ply (mm, vertex colours), models_info.json."""
+def write_model_dir(model: TargetModel, out: Path, obj_id: int) -> None:
+    """Write parts.glb (metres, named materials), the BOP PLY (mm, vertex colours) and models_info.json."""
     out.mkdir(parents=True, exist_ok=True)
     scene = trimesh.Scene()
     for k, (material, mesh) in enumerate(model.parts):
@@ -174,9 +149,9 @@ def write_model_dir(model: TargetModel, out: Path) -> None:
     scene.export(str(out / PARTS_FILE))
     coloured = []
     for material, mesh in model.parts:
-        m = trimesh.Trimesh(mesh.vertices * 1000.0, mesh.faces, process=False)
-        m.visual.vertex_colors = np.tile([*MATERIAL_COLOURS[material], 255], (len(m.vertices), 1))
+        m = trimesh.Trimesh(mesh.vertices * bop.MM_PER_M, mesh.faces, process=False)
+        m.visual.vertex_colors = np.tile([*MATERIALS[material].ply_colour, 255], (len(m.vertices), 1))
         coloured.append(m)
-    trimesh.util.concatenate(coloured).export(str(out / BOP_MODEL_FILE), encoding="binary")
-    info = {k: {kk: float(vv) for kk, vv in v.items()} for k, v in models_info(model).items()}
-    (out / "models_info.json").write_text(json.dumps(info, indent=2) + "\n")
+    trimesh.util.concatenate(coloured).export(str(out / bop.model_file(obj_id)), encoding="binary")
+    info = {str(obj_id): bop.models_info_entry(model.mesh.bounds, model.diameter)}
+    (out / bop.MODELS_INFO_FILE).write_text(json.dumps(info, indent=2) + "\n")

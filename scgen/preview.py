@@ -13,7 +13,9 @@ import cv2
 import numpy as np
 from PIL import Image
 
-from scgen.annotate import Annotation, annotate
+from scgen.annotate import Annotation
+from scgen.factors import distance_groups
+from scgen.generator import Generator
 from scgen.scenes.spec import SceneSpec
 
 TILE_W = 320  # width of a sample's RGB tile in the sheet; the three label panels share it
@@ -100,32 +102,19 @@ def save_png(sheet: np.ndarray, path: Path) -> None:
     Image.fromarray(sheet).quantize(256, method=Image.Quantize.MEDIANCUT).save(path, optimize=True)
 
 
-def build_preview(
-    n: int, seed: int, backend_name: str, resolution: tuple[int, int] | None, quality: str,
-    config_path: Path | None,
-) -> np.ndarray:  # fmt: skip
-    """Sample, render and annotate n scenes exactly as `scgen render` does; return the sheet."""
-    from scgen.model import load_target
-    from scgen.render.base import create_backend
-    from scgen.scenes import load_config, sample_scene
+def build_preview(generator: Generator, n: int) -> np.ndarray:
+    """Sample, render and annotate samples 0..n-1 exactly as `scgen render` does; return the sheet."""
     from scgen.scenes.config import distance_range_m
-    from scgen.scenes.silhouette import TargetShape
 
-    cfg = load_config(config_path, None, resolution)
-    model = load_target()
-    shape = TargetShape.from_mesh(model.mesh)
-    lo, hi = model.mesh.bounds
-    z_lo, z_hi = distance_range_m(cfg, model.diameter)
-    backend = create_backend(backend_name, model, quality=quality)
+    lo, hi = generator.model.mesh.bounds
+    d_lo, d_hi = distance_range_m(generator.cfg, generator.model.diameter)
     tiles = []
-    try:
+    with generator:
         for i in range(n):
-            spec = sample_scene(seed, i, cfg, model.diameter, shape)
-            buffers = backend.render(spec)
-            ann = annotate(spec, buffers)
-            third = min(2, int(3 * (spec.target.t_vec[2] - z_lo) / (z_hi - z_lo)))
-            caption = labels(spec, ann, ("near", "middle", "far")[third])
-            tiles.append(sample_tile(buffers.rgb, ann, xyz_colours(ann.xyz, ann.mask_visib, lo, hi), caption))
-    finally:
-        backend.close()
+            sample = generator.sample(i)
+            spec, ann = sample.spec, sample.annotation
+            (group,), _ = distance_groups(np.array([spec.distance_m]), d_lo, d_hi)
+            caption = labels(spec, ann, group)
+            xyz_rgb = xyz_colours(ann.xyz, ann.mask_visib, lo, hi)
+            tiles.append(sample_tile(sample.buffers.rgb, ann, xyz_rgb, caption))
     return contact_sheet(tiles)

@@ -17,19 +17,19 @@ from tqdm import tqdm
 
 import scgen
 from scgen.atomic import atomic_write_text, remove_stale_temporaries
-from scgen.dataset import FORMAT, MANIFEST, Layout, dumps, read_json
+from scgen.bop import read_json
+from scgen.dataset import FORMAT, MANIFEST, OBJ_ID, Layout, dumps
 from scgen.errors import ScgenError
 from scgen.executors import run_local, run_ray
-from scgen.model import TargetModel, load_target, write_model_dir
+from scgen.factors import spec_key
+from scgen.generator import Generator
+from scgen.model import write_model_dir
 from scgen.render.base import check_backend
-from scgen.scenes import load_config, sample_scene
-from scgen.scenes.silhouette import TargetShape
+from scgen.render.conventions import check_quality
 from scgen.scenes.spec import SceneSpec
 from scgen.splits import SPLITS, plan_splits, split_lists
 from scgen.worker import Done, Task, WorkerSettings
-from scgen.writer import WriteOptions, existing_sample_ids, finalize, spec_key
-
-QUALITIES = ("draft", "default", "high")
+from scgen.writer import WriteOptions, existing_sample_ids, finalize
 
 
 @dataclass
@@ -59,10 +59,9 @@ class RenderJob:
 
 @dataclass
 class Plan:
-    """The resolved inputs of a job: config, model, every SceneSpec and its split."""
+    """The resolved inputs of a job: its generator (model, config), every SceneSpec and its split."""
 
-    cfg: dict[str, Any]
-    model: TargetModel
+    generator: Generator
     specs: list[SceneSpec]
     splits: list[str]
     keys: list[str]
@@ -73,8 +72,7 @@ def validate_job(job: RenderJob) -> None:
     if job.n <= 0:
         raise ScgenError(f"--n must be a positive number of samples, got {job.n}")
     check_backend(job.backend, job.device)  # the renderer can start here (builds none)
-    if job.quality not in QUALITIES:
-        raise ScgenError(f"unknown quality '{job.quality}' (choose from {', '.join(QUALITIES)})")
+    check_quality(job.quality)
     if job.workers <= 0:
         raise ScgenError(f"--workers must be positive, got {job.workers}")
     if job.executor not in ("local", "ray"):
@@ -99,32 +97,34 @@ def _existing_parent(p: Path) -> Path:
 
 
 def make_plan(job: RenderJob) -> Plan:
-    cfg = load_config(job.config_path, job.overrides, job.resolution)
-    model = load_target(job.model_path, keep_scale=job.keep_scale)
-    specs = sample_all(job.seed, job.n, cfg, model, job.workers)
+    generator = Generator.load(
+        job.model_path, job.config_path, job.seed, job.resolution, job.keep_scale, job.overrides,
+        backend=job.backend, quality=job.quality, device=job.device,
+        threads=job.threads or max(1, (os.cpu_count() or 1) // job.workers),
+    )  # fmt: skip
+    specs = sample_all(generator, job.n, job.workers)
     keys = [spec_key(s) for s in specs]
-    return Plan(cfg, model, specs, plan_splits(keys, job.ratios, job.seed, job.split_by), keys)
+    return Plan(generator, specs, plan_splits(keys, job.ratios, job.seed, job.split_by), keys)
 
 
-def _sample_range(args: tuple[int, range, dict[str, Any], TargetModel]) -> list[SceneSpec]:
-    seed, indices, cfg, model = args
-    shape = TargetShape.from_mesh(model.mesh)
-    return [sample_scene(seed, i, cfg, model.diameter, shape) for i in indices]
+def _sample_range(args: tuple[Generator, range]) -> list[SceneSpec]:
+    generator, indices = args
+    return [generator.scene(i) for i in indices]
 
 
-def sample_all(seed: int, n: int, cfg: dict[str, Any], model: TargetModel, workers: int) -> list[SceneSpec]:
+def sample_all(generator: Generator, n: int, workers: int) -> list[SceneSpec]:
     """Every SceneSpec of the job (needed up front for the split plan), in parallel when n is large."""
     if workers <= 1 or n < 500:
-        return _sample_range((seed, range(n), cfg, model))
+        return _sample_range((generator, range(n)))
     step = -(-n // (4 * workers))
-    chunks = [(seed, range(a, min(n, a + step)), cfg, model) for a in range(0, n, step)]
+    chunks = [(generator, range(a, min(n, a + step))) for a in range(0, n, step)]
     with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
         return [spec for part in pool.map(_sample_range, chunks) for spec in part]
 
 
 def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:
     """What identifies a dataset: a resume or a shard must match it exactly."""
-    cfg_text = json.dumps(plan.cfg, sort_keys=True)
+    cfg_text = json.dumps(plan.generator.cfg, sort_keys=True)
     return {
         "format": FORMAT,
         "scgen_version": scgen.__version__,
@@ -132,8 +132,8 @@ def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:
         "n": job.n,
         "backend": job.backend,
         "quality": job.quality,
-        "model": {"name": plan.model.name, "fingerprint": plan.model.fingerprint,
-                  "diameter_m": plan.model.diameter},
+        "model": {"name": plan.generator.model.name, "fingerprint": plan.generator.model.fingerprint,
+                  "diameter_m": plan.generator.model.diameter},
         "config_sha256": hashlib.sha256(cfg_text.encode()).hexdigest(),
         "split_by": job.split_by,
         "split_ratios": list(job.ratios),
@@ -158,12 +158,12 @@ def prepare_output(job: RenderJob, plan: Plan) -> Layout:
         remove_stale_temporaries(layout.root)
         return layout
     layout.root.mkdir(parents=True, exist_ok=True)
-    cam = plan.cfg["camera"]
+    cam = plan.generator.cfg["camera"]
     camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
               "height": cam["height"], "depth_scale": 1.0}  # fmt: skip
-    atomic_write_text(layout.root / "camera.json", dumps(camera))
-    atomic_write_text(layout.root / "config.json", dumps(plan.cfg))
-    write_model_dir(plan.model, layout.root / "models")
+    atomic_write_text(layout.camera_path, dumps(camera))
+    atomic_write_text(layout.root / "config.json", dumps(plan.generator.cfg))
+    write_model_dir(plan.generator.model, layout.models_dir, OBJ_ID)
     atomic_write_text(
         layout.splits_path,
         dumps({"split_by": job.split_by, "ratios": list(job.ratios), "seed": job.seed,
@@ -190,11 +190,7 @@ def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
         for i in shard_indices(job.n, job.shard)
         if i not in done
     ]
-    settings = WorkerSettings(
-        out=job.out, backend=job.backend, quality=job.quality, device=job.device, model_path=job.model_path,
-        keep_scale=job.keep_scale, write=job.write,
-        threads=job.threads or max(1, (os.cpu_count() or 1) // job.workers),
-    )  # fmt: skip
+    settings = WorkerSettings(plan.generator, job.out, job.write)
     timings = {"render_s": 0.0, "other_s": 0.0}
     bar = tqdm(
         total=len(tasks), unit="img", disable=not progress, file=sys.stderr, desc="render", smoothing=0.1

@@ -81,11 +81,6 @@ def viewpoint_cell(R: np.ndarray, t: np.ndarray) -> int:
     return int(np.argmax(_CELLS @ view_direction(R, t)))
 
 
-def combination_key(cell: int, illumination: str, background: str, occluder_config: str) -> str:
-    """The factor-combination key: viewpoint cell, illumination level, background, occluder config."""
-    return f"v{cell:02d}|{illumination}|{background}|{occluder_config}"
-
-
 def parse_ratios(text: str | Sequence[float]) -> tuple[float, float, float]:
     """'0.7,0.1,0.2' -> (0.7, 0.1, 0.2); they must be three non-negative numbers summing to 1."""
     try:

@@ -12,26 +12,9 @@ import numpy as np
 
 from scgen.dataset import read_metadata
 from scgen.errors import ScgenError
+from scgen.factors import FACTOR_GROUPS, distance_groups
 from scgen.scenes.geometry import quat_to_matrix
 from scgen.splits import SPLITS, view_direction
-
-FACTOR_GROUPS: dict[str, tuple[str, ...]] = {
-    "illumination": ("weak", "normal", "strong"),
-    "shadow": ("no", "yes"),
-    "occlusion": ("none", "slight", "moderate", "heavy"),
-    "background": ("clean", "complex", "earth", "cluttered"),
-    "distance": ("near", "middle", "far"),
-}
-
-
-def distance_groups(distances: np.ndarray) -> tuple[list[str], list[float]]:
-    """near / middle / far by thirds of the range of `distances`; returns labels and the edges (m)."""
-    if len(distances) == 0:
-        return [], []
-    lo, hi = float(distances.min()), float(distances.max())
-    edges = [lo, lo + (hi - lo) / 3, lo + 2 * (hi - lo) / 3, hi]
-    idx = np.clip(np.searchsorted(edges[1:3], distances, side="right"), 0, 2)
-    return [FACTOR_GROUPS["distance"][i] for i in idx], edges
 
 
 def group_labels(rows: list[dict[str, str]]) -> dict[str, list[str]]:

@@ -9,8 +9,11 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from scgen import bop
 from scgen.annotate.annotate import mask_bbox
-from scgen.dataset import Layout, open_dataset, read_json, read_metadata
+from scgen.bop import read_json
+from scgen.dataset import OBJ_ID, Layout, open_dataset, read_metadata
+from scgen.errors import ScgenError
 from scgen.exr import read_xyz_exr
 from scgen.scenes.geometry import project
 
@@ -25,12 +28,11 @@ def validate_dataset(root: str | Path, progress: bool = True) -> tuple[list[str]
     rows = {int(r["sample_id"]): r for r in read_metadata(root)}
     splits = read_json(layout.splits_path)["splits"]
     split_of = {i: s for s, ids in splits.items() for i in ids}
-    info = read_json(layout.root / "models" / "models_info.json")["1"]
-    lo = np.array([info["min_x"], info["min_y"], info["min_z"]]) / 1000.0
-    hi = lo + np.array([info["size_x"], info["size_y"], info["size_z"]]) / 1000.0
+    lo, size = bop.model_box_m(bop.read_models_info(layout.root)[str(OBJ_ID)])
     records = list(layout.record_paths())
     if len(rows) != len(records):
         problems.append(f"metadata.csv has {len(rows)} rows but {len(records)} samples are on disk")
+    scene_files: dict[Path, dict[str, Any]] = {}
     for path in tqdm(records, desc="validate", unit="img", disable=not progress):
         rec = read_json(path)
         sid, split = rec["sample_id"], rec["split"]
@@ -38,8 +40,37 @@ def validate_dataset(root: str | Path, progress: bool = True) -> tuple[list[str]
             problems.append(f"sample {sid}: in folder '{split}' but splits.json says '{split_of.get(sid)}'")
         if sid not in rows:
             problems.append(f"sample {sid}: missing from metadata.csv")
-        problems += [f"sample {sid}: {p}" for p in check_sample(layout, manifest, rec, lo, hi)]
+        scene = layout.chunk_dir(split, sid)
+        if scene not in scene_files:
+            scene_files[scene] = read_scene_files(scene)
+        bop_problems = check_bop_entries(scene_files[scene], rec)
+        problems += [f"sample {sid}: {p}" for p in bop_problems]
+        if not bop_problems:
+            problems += [f"sample {sid}: {p}" for p in check_sample(layout, manifest, rec, lo, lo + size)]
     return problems, len(records)
+
+
+def read_scene_files(scene: Path) -> dict[str, Any]:
+    """{name: content} of a scene folder's BOP JSON files (None where missing or unreadable)."""
+    out: dict[str, Any] = {}
+    for name in bop.SCENE_FILES:
+        path = bop.scene_file(scene, name)
+        try:
+            out[name] = read_json(path)
+        except ScgenError:
+            out[name] = None
+    return out
+
+
+def check_bop_entries(scene_files: dict[str, Any], rec: dict[str, Any]) -> list[str]:
+    """The BOP files (what posenet and bop_toolkit read) must hold exactly the sample's record."""
+    out = []
+    for name, content in scene_files.items():
+        if content is None:
+            out.append(f"{name}.json missing or unreadable")
+        elif content.get(str(rec["sample_id"])) != rec[name]:
+            out.append(f"{name}.json entry missing or different from the sample's record")
+    return out
 
 
 def _read_mask(path: Path) -> np.ndarray | None:
@@ -94,10 +125,8 @@ def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], 
 def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: dict[str, Any],
               lo: np.ndarray, hi: np.ndarray) -> list[str]:  # fmt: skip
     """xyz must reproject onto its own pixels and lie inside the model's bounding box."""
-    gt = rec["scene_gt"][0]
-    R = np.asarray(gt["cam_R_m2c"]).reshape(3, 3)
-    t = np.asarray(gt["cam_t_m2c"]) / 1000.0
-    K = np.asarray(rec["scene_camera"]["cam_K"]).reshape(3, 3)
+    R, t = bop.gt_pose(rec["scene_gt"][0])
+    K = bop.camera_K(rec["scene_camera"])
     vs, us = np.nonzero(vis)
     C = crop[vs, us].astype(np.float64)
     err = reprojection_error(C, us + offset[0], vs + offset[1], K, R, t)

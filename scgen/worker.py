@@ -10,26 +10,19 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from scgen.annotate import annotate
 from scgen.dataset import Layout
-from scgen.model import load_target
-from scgen.render.base import create_backend
+from scgen.generator import Generator
 from scgen.scenes.spec import SceneSpec
 from scgen.writer import WriteOptions, write_sample
 
 
 @dataclass(frozen=True)
 class WorkerSettings:
-    """Picklable settings every worker needs to build its renderer and write samples."""
+    """Picklable: the job's generator (model, config, renderer settings) and where and how to write."""
 
+    generator: Generator
     out: Path
-    backend: str
-    quality: str
-    device: str
-    model_path: Path | None
-    keep_scale: bool
     write: WriteOptions
-    threads: int | None = None  # renderer threads per worker; None = all cores
 
 
 @dataclass(frozen=True)
@@ -42,32 +35,24 @@ class Task:
 @dataclass(frozen=True)
 class Done:
     index: int
-    render_s: float
-    other_s: float
+    render_s: float  # render and annotate
+    other_s: float  # encode and write
 
 
 class SampleWorker:
-    """One renderer scene, built once, updated per sample."""
+    """One renderer, built on the first task and reused for every later one."""
 
     def __init__(self, settings: WorkerSettings) -> None:
         self.settings = settings
-        model = load_target(settings.model_path, keep_scale=settings.keep_scale)
-        self.backend = create_backend(
-            settings.backend,
-            model,
-            quality=settings.quality,
-            device=settings.device,
-            threads=settings.threads,
-        )
         self.layout = Layout(settings.out)
 
     def run(self, task: Task) -> Done:
         spec = SceneSpec.from_dict(task.spec)
         t0 = time.perf_counter()
-        buffers = self.backend.render(spec)
+        sample = self.settings.generator.render(spec)
         t1 = time.perf_counter()
-        write_sample(self.layout, spec, buffers, annotate(spec, buffers), task.split, self.settings.write)
+        write_sample(self.layout, spec, sample.buffers, sample.annotation, task.split, self.settings.write)
         return Done(task.index, t1 - t0, time.perf_counter() - t1)
 
     def close(self) -> None:
-        self.backend.close()
+        self.settings.generator.close()

@@ -17,14 +17,17 @@ from typing import Any
 import cv2
 import numpy as np
 
+from scgen import bop
 from scgen.annotate import Annotation
 from scgen.atomic import atomic_write_bytes, atomic_write_text
+from scgen.bop import read_json
 from scgen.buffers import Buffers
-from scgen.dataset import CHUNK, Layout, dumps, read_json
+from scgen.dataset import CHUNK, OBJ_ID, Layout, dumps
 from scgen.exr import encode_xyz_exr
+from scgen.factors import occluder_config, spec_key
 from scgen.scenes.geometry import matrix_to_quat
 from scgen.scenes.spec import SceneSpec
-from scgen.splits import combination_key, viewpoint_cell
+from scgen.splits import viewpoint_cell
 
 DEPTH_SCALES = (0.01, 0.1, 1.0, 10.0)  # mm per depth unit; the smallest that cannot wrap is chosen
 METADATA_COLUMNS = (
@@ -42,21 +45,9 @@ class WriteOptions:
     save_depth: bool = False
 
 
-def occluder_config(spec: SceneSpec) -> str:
-    """The occluder part of the combination key: requested group and the occluders' shapes."""
-    shapes = "+".join(sorted(p.shape for p in spec.occluders)) or "-"
-    return f"{spec.requested_occlusion}:{shapes}"
-
-
-def spec_key(spec: SceneSpec) -> str:
-    """The factor-combination key of a sample, from its SceneSpec."""
-    cell = viewpoint_cell(spec.target.R_mat, spec.target.t_vec)
-    return combination_key(cell, spec.sun.level, spec.background.kind, occluder_config(spec))
-
-
 def choose_depth_scale(depth_m: np.ndarray) -> float:
     """Smallest BOP depth_scale (mm per unit) for which the largest depth fits in uint16."""
-    max_mm = float(depth_m.max()) * 1000.0 if depth_m.size else 0.0
+    max_mm = float(depth_m.max()) * bop.MM_PER_M if depth_m.size else 0.0
     for scale in DEPTH_SCALES:
         if max_mm / scale <= 65535:
             return scale
@@ -104,7 +95,7 @@ def write_sample(
         depth_scale = choose_depth_scale(buffers.depth)
         depth_path = layout.depth(split, sid)
         depth_path.parent.mkdir(parents=True, exist_ok=True)
-        depth_u16 = np.round(buffers.depth * 1000.0 / depth_scale).astype(np.uint16)
+        depth_u16 = np.round(buffers.depth * bop.MM_PER_M / depth_scale).astype(np.uint16)
         atomic_write_bytes(depth_path, _png(depth_u16))
     record = build_record(spec, ann, split, xyz_box, depth_scale)
     record_path = layout.record(split, sid)
@@ -157,8 +148,7 @@ def build_record(
     return {
         "sample_id": spec.index,
         "split": split,
-        "scene_gt": [{"cam_R_m2c": [float(x) for x in R.reshape(9)],
-                      "cam_t_m2c": [float(x) for x in t * 1000.0], "obj_id": 1}],
+        "scene_gt": [bop.gt_entry(R, t, OBJ_ID)],
         "scene_camera": {"cam_K": list(spec.camera.K), "depth_scale": depth_scale,
                          "exposure_ev": spec.camera.exposure_ev},
         "scene_gt_info": [{"bbox_obj": ann.bbox_obj, "bbox_visib": ann.bbox_visib,
@@ -179,8 +169,8 @@ def finalize(layout: Layout) -> int:
         chunks[(r["split"], r["sample_id"] // CHUNK)].append(r)
     for (split, _), recs in chunks.items():
         d = layout.chunk_dir(split, recs[0]["sample_id"])
-        for name in ("scene_gt", "scene_camera", "scene_gt_info"):
-            atomic_write_text(d / f"{name}.json", dumps({str(r["sample_id"]): r[name] for r in recs}))
+        for name in bop.SCENE_FILES:
+            atomic_write_text(bop.scene_file(d, name), dumps({str(r["sample_id"]): r[name] for r in recs}))
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=METADATA_COLUMNS, lineterminator="\n")
     writer.writeheader()

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from scgen.model import TargetModel, load_target
 from scgen.runner import RenderJob, run_render
 
 SMALL = (320, 240)
@@ -22,3 +23,9 @@ def render_dataset(out: Path, n: int, seed: int = 0, **kwargs) -> Path:
 def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """12 samples of seed 0: shared, read-only for the tests that use it."""
     return render_dataset(tmp_path_factory.mktemp("ds") / "small", n=12)
+
+
+@pytest.fixture(scope="session")
+def spacecraft() -> TargetModel:
+    """The bundled spacecraft (read-only)."""
+    return load_target()

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from scgen.annotate import annotate
-from scgen.annotate.annotate import mask_bbox, occlusion_group
+from scgen.annotate.annotate import mask_bbox
+from scgen.factors import occlusion_group
+from scgen.generator import Generator
 from scgen.model import load_target, normalise_parts
-from scgen.render.base import create_backend
-from scgen.scenes import load_config, sample_scene
+from scgen.scenes import load_config
 from scgen.validate import reprojection_error
 
 RES = (320, 240)
@@ -27,11 +27,10 @@ def odd_mesh_model():
 
 def rendered_samples(model, n: int = 4):
     cfg = load_config(resolution=RES, overrides={"distance": {"range_m": [0.45, 1.2]}})
-    backend = create_backend("mitsuba", model, quality="draft")
-    for i in range(n):
-        spec = sample_scene(11, i, cfg, model.diameter)
-        buffers = backend.render(spec)
-        yield spec, buffers, annotate(spec, buffers)
+    with Generator(model, cfg, 11, backend="mitsuba", quality="draft") as generator:
+        for i in range(n):
+            sample = generator.sample(i)
+            yield sample.spec, sample.buffers, sample.annotation
 
 
 @pytest.mark.parametrize("make_model", [load_target, odd_mesh_model], ids=["spacecraft", "odd_mesh"])
@@ -77,10 +76,9 @@ def test_no_props_means_no_occlusion_and_no_cast_shadow():
             "background": {"probs": {"clean": 1.0, "complex": 0.0, "earth": 0.0, "cluttered": 0.0}},
         },
     )  # fmt: skip
-    backend = create_backend("mitsuba", model, quality="draft")
-    spec = sample_scene(0, 1, cfg, model.diameter)
+    sample = Generator(model, cfg, 0, backend="mitsuba", quality="draft").sample(1)
+    spec, ann = sample.spec, sample.annotation
     assert spec.props == ()
-    ann = annotate(spec, backend.render(spec))
     assert ann.r_occ == 0 and (ann.mask == ann.mask_visib).all() and ann.shadow_fraction == 0
 
 
@@ -88,7 +86,5 @@ def test_shadow_caster_in_the_sun_path_shades_the_target():
     model = load_target()
     cfg = load_config(resolution=RES, overrides={"shadow": {"caster_prob": 1.0, "offset_diam": [0.0, 0.0],
                                                             "size_diam": [2.0, 2.0]}})  # fmt: skip
-    backend = create_backend("mitsuba", model, quality="draft")
-    spec = sample_scene(0, 2, cfg, model.diameter)
-    ann = annotate(spec, backend.render(spec))
+    ann = Generator(model, cfg, 0, backend="mitsuba", quality="draft").sample(2).annotation
     assert ann.shadow_fraction > 0.9 and ann.shadow_label == "yes"

@@ -12,6 +12,7 @@ import trimesh
 
 from scgen.buffers import TARGET_ID
 from scgen.errors import ScgenError
+from scgen.generator import Generator
 from scgen.model import load_target, normalise_parts
 from scgen.render.backgrounds import srgb_to_linear
 from scgen.render.base import create_backend
@@ -19,7 +20,7 @@ from scgen.render.blender import BlenderBackend
 from scgen.render.blender_env import import_bpy, select_device
 from scgen.render.lighting import exposure_scale, sun_render_irradiance
 from scgen.render.mitsuba_backend import MitsubaBackend, select_variant
-from scgen.scenes import load_config, sample_scene
+from scgen.scenes import load_config
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, SceneSpec, SunSpec
 
 
@@ -118,7 +119,8 @@ def test_any_principal_point_and_portrait_images_are_exact(model):
     """Off-centre principal point, H > W: masks and depth still match Mitsuba's ray casts."""
     cfg = load_config(overrides={"camera": {"width": 120, "height": 160, "fx": 150.0, "fy": 150.0,
                                             "cx": 50.3, "cy": 90.8}})  # fmt: skip
-    specs = [sample_scene(3, i, cfg, model.diameter) for i in range(2)]
+    generator = Generator(model, cfg, 3)
+    specs = [generator.scene(i) for i in range(2)]
     blender = BlenderBackend(model, quality="draft")
     try:
         b = [blender.render(s) for s in specs]
@@ -139,7 +141,8 @@ def test_scene_is_updated_in_place_and_renders_are_reproducible(model):
     import bpy
 
     cfg = load_config(resolution=(160, 120))
-    specs = [sample_scene(0, i, cfg, model.diameter) for i in range(40)]
+    generator = Generator(model, cfg, 0)
+    specs = [generator.scene(i) for i in range(40)]
     with_props = max(specs, key=lambda s: len(s.props))
     without = next(s for s in specs if not s.props)
     assert len(with_props.props) >= 3
@@ -162,7 +165,8 @@ def test_without_props_nothing_shadows_the_target_even_on_a_fresh_backends_first
     """Only props may block the probe sun (shadow linking): with none in the scene, no target pixel is
     sun-blocked, also before any prop was ever made (Blender ignores an empty blocker collection)."""
     cfg = load_config(resolution=(160, 120))
-    specs = [s for s in (sample_scene(0, i, cfg, model.diameter) for i in range(40)) if not s.props]
+    generator = Generator(model, cfg, 0)
+    specs = [s for s in (generator.scene(i) for i in range(40)) if not s.props]
     spec = min(specs, key=lambda s: s.target.t_vec[2])  # the nearest target: many pixels
     backend = BlenderBackend(model, quality="draft", threads=1)
     try:
@@ -177,7 +181,8 @@ def test_without_props_nothing_shadows_the_target_even_on_a_fresh_backends_first
 def test_a_sample_does_not_depend_on_what_its_worker_rendered_before(model):
     """Sample i must be the same on a fresh worker and after other samples (shards, resume, K workers)."""
     cfg = load_config(resolution=(160, 120))
-    specs = [sample_scene(0, i, cfg, model.diameter) for i in range(40)]
+    generator = Generator(model, cfg, 0)
+    specs = [generator.scene(i) for i in range(40)]
     busy = max(specs, key=lambda s: len(s.props))
     for spec in (min((s for s in specs if not s.props), key=lambda s: s.target.t_vec[2]), specs[1]):
         results = []

@@ -14,10 +14,11 @@ import trimesh
 
 from scgen.annotate.annotate import annotate
 from scgen.buffers import TARGET_ID
+from scgen.generator import Generator
 from scgen.model import load_target
 from scgen.render.blender import BlenderBackend
 from scgen.render.mitsuba_backend import MitsubaBackend
-from scgen.scenes import load_config, sample_scene
+from scgen.scenes import load_config
 
 N_SAMPLES = 8  # seed 0, samples 0-7: clutter, occluders of every group, shadow casters, Earth, no props
 
@@ -30,7 +31,8 @@ def model():
 @pytest.fixture(scope="module")
 def rendered(model):
     cfg = load_config(resolution=(320, 240))
-    specs = [sample_scene(0, i, cfg, model.diameter) for i in range(N_SAMPLES)]
+    generator = Generator(model, cfg, 0)
+    specs = [generator.scene(i) for i in range(N_SAMPLES)]
     blender = BlenderBackend(model, quality="default", device="cpu")
     try:
         b = [blender.render(s) for s in specs]

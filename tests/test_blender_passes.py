@@ -7,16 +7,18 @@ import dataclasses
 import numpy as np
 import pytest
 
+from scgen.generator import Generator
 from scgen.model import load_target
 from scgen.render.blender import props_may_hide_target
-from scgen.scenes import load_config, sample_scene
+from scgen.scenes import load_config
 
 
 @pytest.fixture(scope="module")
 def scene():
     model = load_target()
     cfg = load_config(resolution=(160, 120))
-    spec = next(s for s in (sample_scene(1, i, cfg, model.diameter) for i in range(50)) if s.props)
+    generator = Generator(model, cfg, 1)
+    spec = next(s for s in (generator.scene(i) for i in range(50)) if s.props)
     hull = np.asarray(model.mesh.convex_hull.vertices)
     x = hull @ spec.target.R_mat.T + spec.target.t_vec
     uv = (x[:, :2] / x[:, 2:]) @ spec.camera.K_mat[:2, :2].T + spec.camera.K_mat[:2, 2]

@@ -7,15 +7,18 @@ import numpy as np
 import pytest
 
 from scgen.errors import ScgenError
+from scgen.generator import Generator
+from scgen.model import load_target
 from scgen.render.backgrounds import background_image, srgb_to_linear
-from scgen.scenes import load_config, sample_scene
+from scgen.scenes import load_config
 
 SMALL = (160, 120)
 
 
 def kind_specs(kind: str, n: int = 4, **background) -> list:
     cfg = load_config(overrides={"background": {"probs": {kind: 1.0}, **background}}, resolution=SMALL)
-    return [sample_scene(2, i, cfg, 0.2) for i in range(n)]
+    generator = Generator(load_target(), cfg, 2)
+    return [generator.scene(i) for i in range(n)]
 
 
 def test_background_is_deterministic_and_kinds_differ():

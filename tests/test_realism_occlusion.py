@@ -22,7 +22,7 @@ def model():
 
 @pytest.fixture(scope="module")
 def shape(model):
-    return TargetShape.from_mesh(model.mesh)
+    return TargetShape.from_mesh(model.mesh, model.diameter)
 
 
 @pytest.fixture(scope="module")
@@ -45,14 +45,14 @@ def only(group: str, **extra) -> dict:
 def test_requested_group_is_what_the_render_measures(model, shape, backend, group, check):
     cfg = only(group, distractor_prob=1.0)
     r_occ = [annotate(s, backend.render_geometry(s)).r_occ
-             for s in (sample_scene(5, i, cfg, model.diameter, shape) for i in range(8))]  # fmt: skip
+             for s in (sample_scene(5, i, cfg, shape) for i in range(8))]  # fmt: skip
     assert sum(check(r) for r in r_occ) >= 7, r_occ
 
 
 def test_sampler_silhouette_matches_the_rendered_mask(model, shape, backend):
     cfg = only("none", distractor_prob=0.0)
     for i in range(4):
-        spec = sample_scene(2, i, cfg, model.diameter, shape)
+        spec = sample_scene(2, i, cfg, shape)
         K = spec.camera.K_mat
         view = camera_view(K, *SMALL, shape.in_camera(spec.target.R_mat, spec.target.t_vec), max_side=10_000)
         mask = annotate(spec, backend.render_geometry(spec)).mask
@@ -68,7 +68,7 @@ def test_aim_without_rendering_hits_every_group(model, shape):
         cfg = only(group)
         hits = 0
         for i in range(30):
-            spec = sample_scene(7, i, cfg, model.diameter, shape)
+            spec = sample_scene(7, i, cfg, shape)
             occ = spec.occluders[0]
             target = shape.in_camera(spec.target.R_mat, spec.target.t_vec)
             view = camera_view(spec.camera.K_mat, *SMALL, target)
@@ -81,7 +81,7 @@ def test_aim_without_rendering_hits_every_group(model, shape):
 def test_occluders_stay_in_front_of_the_target(model, shape):
     cfg = load_config(resolution=SMALL)
     for i in range(60):
-        spec = sample_scene(0, i, cfg, model.diameter, shape)
+        spec = sample_scene(0, i, cfg, shape)
         for occ in spec.occluders:
             far_side = occ.pose.t_vec[2] + bounding_radius(occ.shape, np.asarray(occ.size))
             assert far_side < spec.target.t_vec[2] - shape.radius

@@ -17,7 +17,7 @@ NO_OCCLUDERS = {"group_probs": {"none": 1.0}, "distractor_prob": 0.0}
 @pytest.fixture(scope="module")
 def setup():
     model = load_target()
-    return model, TargetShape.from_mesh(model.mesh), MitsubaBackend(model, quality="draft")
+    return model, TargetShape.from_mesh(model.mesh, model.diameter), MitsubaBackend(model, quality="draft")
 
 
 @pytest.mark.parametrize("caster_prob, expect_yes", [(1.0, True), (0.0, False)])
@@ -27,7 +27,7 @@ def test_shadow_label_follows_the_caster(setup, caster_prob, expect_yes):
                                  "background": {"probs": {"clean": 1.0}}}, resolution=SMALL)  # fmt: skip
     anns = []
     for i in range(10):
-        spec = sample_scene(3, i, cfg, model.diameter, shape)
+        spec = sample_scene(3, i, cfg, shape)
         assert spec.shadow_caster == expect_yes
         anns.append(annotate(spec, backend.render_geometry(spec)))
     yes = sum(a.shadow_label == "yes" for a in anns)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import filecmp
+import json
 import shutil
 from pathlib import Path
 
@@ -14,8 +15,9 @@ import trimesh
 from click.testing import CliRunner
 
 from scgen.annotate import annotate
+from scgen.bop import read_json
 from scgen.cli import main
-from scgen.dataset import Layout, read_json
+from scgen.dataset import Layout
 from scgen.exr import encode_xyz_exr, read_xyz_exr
 from scgen.model import load_target
 from scgen.render.base import create_backend
@@ -51,7 +53,7 @@ def test_dataset_has_bop_layout_and_one_metadata_row_per_image(small_dataset: Pa
 def test_sample_rendered_alone_equals_sample_from_the_run(small_dataset: Path):
     model = load_target()
     cfg = load_config(resolution=SMALL)
-    spec = sample_scene(0, 7, cfg, model.diameter, TargetShape.from_mesh(model.mesh))
+    spec = sample_scene(0, 7, cfg, TargetShape.from_mesh(model.mesh, model.diameter))
     ann = annotate(spec, create_backend("mitsuba", model, quality="draft").render(spec))
     layout = Layout(small_dataset)
     split = _split(layout, 7)
@@ -84,10 +86,16 @@ def test_validate_passes_then_names_tampered_files(small_dataset: Path, tmp_path
     xyz_sample = next(i for i in range(12) if i != 3 and layout.xyz(_split(layout, i), i).exists())
     xyz_path = layout.xyz(_split(layout, xyz_sample), xyz_sample)
     xyz_path.write_bytes(encode_xyz_exr(read_xyz_exr(xyz_path) + 0.01))
+    gt_sample = next(i for i in range(12) if i not in (3, xyz_sample))
+    gt_path = layout.chunk_dir(_split(layout, gt_sample), gt_sample) / "scene_gt.json"
+    gt = read_json(gt_path)
+    gt[str(gt_sample)][0]["cam_t_m2c"][2] += 10.0  # what posenet would read: 1 cm further away
+    gt_path.write_text(json.dumps(gt))
     result = CliRunner().invoke(main, ["validate", str(bad)])
     assert result.exit_code != 0
     assert "sample 3: mask_visib has" in result.output
     assert f"sample {xyz_sample}: xyz reprojects" in result.output
+    assert f"sample {gt_sample}: scene_gt.json entry missing or different" in result.output
 
 
 def _split(layout: Layout, i: int) -> str:

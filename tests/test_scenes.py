@@ -8,31 +8,33 @@ import numpy as np
 import pytest
 
 from scgen.errors import ScgenError
-from scgen.scenes import SceneSpec, load_config, sample_scene
+from scgen.generator import Generator
+from scgen.scenes import SceneSpec, load_config
 from scgen.scenes.config import distance_range_m
 
 
-def test_same_seed_same_spec_and_json_round_trip():
+def test_same_seed_same_spec_and_json_round_trip(spacecraft):
     cfg = load_config()
-    a = sample_scene(3, 7, cfg, 0.2)
-    b = sample_scene(3, 7, cfg, 0.2)
+    a = Generator(spacecraft, cfg, 3).scene(7)
+    b = Generator(spacecraft, cfg, 3).scene(7)
     assert a == b
     assert SceneSpec.from_dict(json.loads(json.dumps(a.to_dict()))) == a
-    assert sample_scene(4, 7, cfg, 0.2) != a
+    assert Generator(spacecraft, cfg, 4).scene(7) != a
 
 
-def test_changing_one_factor_distribution_leaves_the_others_unchanged():
-    base = load_config()
-    lit = load_config(overrides={"illumination": {"probs": {"weak": 1.0, "normal": 0.0, "strong": 0.0}}})
+def test_changing_one_factor_distribution_leaves_the_others_unchanged(spacecraft):
+    base = Generator(spacecraft, load_config(), 0)
+    lit_cfg = load_config(overrides={"illumination": {"probs": {"weak": 1.0, "normal": 0.0, "strong": 0.0}}})
+    lit = Generator(spacecraft, lit_cfg, 0)
     for i in range(30):
-        a, b = sample_scene(0, i, base, 0.2), sample_scene(0, i, lit, 0.2)
+        a, b = base.scene(i), lit.scene(i)
         assert b.sun.level == "weak"
         assert a.target == b.target and a.background == b.background and a.props == b.props
 
 
-def test_pose_is_uniform_on_so3_and_target_stays_in_frame():
-    cfg = load_config()
-    specs = [sample_scene(1, i, cfg, 0.2) for i in range(600)]
+def test_pose_is_uniform_on_so3_and_target_stays_in_frame(spacecraft):
+    generator = Generator(spacecraft, load_config(), 1)
+    specs = [generator.scene(i) for i in range(600)]
     # for a uniform rotation, each column's z-component is uniform on [-1, 1]: mean 0, variance 1/3
     zs = np.array([s.target.R_mat[2, 0] for s in specs])
     assert abs(zs.mean()) < 0.08 and abs(zs.var() - 1 / 3) < 0.05
@@ -49,8 +51,8 @@ def test_default_distance_range_gives_60_to_300_px_diameter():
     assert 600 * 0.2 / lo == pytest.approx(300) and 600 * 0.2 / hi == pytest.approx(60)
 
 
-def test_every_factor_is_labelled():
-    s = sample_scene(0, 0, load_config(), 0.2)
+def test_every_factor_is_labelled(spacecraft):
+    s = Generator(spacecraft, load_config(), 0).scene(0)
     assert s.sun.level in ("weak", "normal", "strong")
     assert s.background.kind in ("clean", "complex", "earth", "cluttered")
     assert s.requested_occlusion in ("none", "slight", "moderate", "heavy")

@@ -9,20 +9,20 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from scgen.bop import read_json
 from scgen.cli import main
-from scgen.dataset import read_json, read_metadata
-from scgen.model import load_target
-from scgen.scenes import load_config, sample_scene
+from scgen.dataset import read_metadata
+from scgen.factors import FACTOR_GROUPS, combination_key, spec_key
+from scgen.generator import Generator
+from scgen.scenes import load_config
 from scgen.scenes.geometry import quat_to_matrix
-from scgen.splits import combination_key, leakage, plan_splits, viewpoint_cell, viewpoint_cells
-from scgen.stats import FACTOR_GROUPS
-from scgen.writer import spec_key
+from scgen.splits import leakage, plan_splits, viewpoint_cell, viewpoint_cells
 
 
 @pytest.fixture(scope="module")
-def keys_1000() -> list[str]:
-    cfg, d = load_config(), load_target().diameter
-    return [spec_key(sample_scene(5, i, cfg, d)) for i in range(1000)]
+def keys_1000(spacecraft) -> list[str]:
+    generator = Generator(spacecraft, load_config(), 5)
+    return [spec_key(generator.scene(i)) for i in range(1000)]
 
 
 def test_factor_split_has_no_leakage_and_ratios_within_2pp(keys_1000):

@@ -10,10 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from scgen.buffers import TARGET_ID, Buffers
-from scgen.scenes.spec import SceneSpec
-
-SHADOW_THRESHOLD = 0.05  # shadow label "yes" when >= 5 % of the lit, visible target is in cast shadow
-OCCLUSION_LIMITS = (("none", 0.0), ("slight", 0.2), ("moderate", 0.4))  # r_occ upper bounds; above: heavy
+from scgen.factors import occlusion_group, shadow_label
+from scgen.scenes.spec import CameraSpec, SceneSpec
 
 
 @dataclass
@@ -37,23 +35,12 @@ class Annotation:
 
     @property
     def shadow_label(self) -> str:
-        return "yes" if self.shadow_fraction >= SHADOW_THRESHOLD else "no"
+        return shadow_label(self.shadow_fraction)
 
 
-def occlusion_group(r_occ: float) -> str:
-    """The paper's groups: none (r_occ = 0), slight (<= 0.2), moderate (<= 0.4), heavy (> 0.4)."""
-    for name, limit in OCCLUSION_LIMITS:
-        if r_occ <= limit:
-            return name
-    return "heavy"
-
-
-def backproject_to_model(depth: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """C = R^T (z K^-1 [u, v, 1]^T - t) for every pixel (H x W x 3); pixel centres at integers."""
-    h, w = depth.shape
-    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
-    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(K).T
-    x_cam = rays * depth[..., None].astype(np.float64)
+def backproject_to_model(depth: np.ndarray, camera: CameraSpec, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """C = R^T (z K^-1 [u, v, 1]^T - t) for every pixel (H x W x 3) of the camera's depth map."""
+    x_cam = camera.pixel_rays() * depth[..., None].astype(np.float64)
     return (x_cam - t) @ R  # row-vector form of R^T (x - t)
 
 
@@ -69,8 +56,7 @@ def annotate(spec: SceneSpec, buffers: Buffers) -> Annotation:
     """All labels of one rendered sample."""
     mask = buffers.target_depth > 0
     mask_visib = (buffers.instance == TARGET_ID) & mask
-    K = spec.camera.K_mat
-    xyz = backproject_to_model(buffers.depth, K, spec.target.R_mat, spec.target.t_vec)
+    xyz = backproject_to_model(buffers.depth, spec.camera, spec.target.R_mat, spec.target.t_vec)
     xyz = np.where(mask_visib[..., None], xyz, 0.0).astype(np.float32)
     n_all = int(mask.sum())
     n_vis = int(mask_visib.sum())

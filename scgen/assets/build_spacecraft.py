@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from scgen.dataset import OBJ_ID
 from scgen.model import TargetModel, normalise_parts, write_model_dir
 
 ASSET_DIR = Path(__file__).resolve().parents[2] / "assets" / "spacecraft"
@@ -99,7 +100,7 @@ def build_spacecraft() -> TargetModel:
 
 def main() -> None:
     model = build_spacecraft()
-    write_model_dir(model, ASSET_DIR)
+    write_model_dir(model, ASSET_DIR, OBJ_ID)
     print(f"wrote {ASSET_DIR}: {len(model.mesh.faces)} triangles, diameter {model.diameter * 1000:.1f} mm")
 
 

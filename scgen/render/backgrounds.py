@@ -20,7 +20,7 @@ import numpy as np
 
 from scgen.errors import ScgenError
 from scgen.render.lighting import exposure_scale
-from scgen.scenes.geometry import random_rotation
+from scgen.scenes.geometry import random_rotation, unit_sphere_hits
 from scgen.scenes.spec import SceneSpec
 
 STARS_PER_MEGAPIXEL = {"clean": 150, "earth": 150, "cluttered": 600, "complex": 6000}
@@ -42,21 +42,13 @@ def background_image(spec: SceneSpec) -> np.ndarray:
     density = STARS_PER_MEGAPIXEL[kind] * cam.width * cam.height / 1e6
     img = _star_field(rng, cam.height, cam.width, int(density)) * gain
     if kind == "complex":
-        rays = pixel_rays(spec)
+        rays = spec.camera.pixel_directions()
         img += gain * _milky_way(rng, rays)
         img += gain * _nebula(rng, cam.height, cam.width)
         img += _glare(rng, spec)
     elif kind == "earth":
-        img = _earth(spec, rng, pixel_rays(spec), img)
+        img = _earth(spec, rng, spec.camera.pixel_directions(), img)
     return img.astype(np.float32)
-
-
-def pixel_rays(spec: SceneSpec) -> np.ndarray:
-    """Unit camera-frame directions through every pixel centre (H x W x 3)."""
-    cam = spec.camera
-    v, u = np.mgrid[0 : cam.height, 0 : cam.width].astype(np.float64)
-    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(cam.K_mat).T
-    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
 
 
 def _star_field(rng: np.random.Generator, h: int, w: int, n_stars: int) -> np.ndarray:
@@ -176,13 +168,10 @@ def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: n
     c = np.asarray(params["centre_dir"], np.float64)
     rho = np.deg2rad(params["angular_radius_deg"])
     centre = c / np.sin(rho)  # Earth of radius 1 at this distance subtends rho
-    b = rays @ centre
-    disc = b * b - (centre @ centre - 1.0)
-    hit = disc > 0
+    hit, n, b, disc = unit_sphere_hits(rays, centre)  # n: unit surface normals
     sun = np.asarray(spec.sun.direction)
     irr = spec.sun.irradiance * exposure_scale(spec)  # image value of a white plate facing the sun
 
-    n = rays[hit] * (b[hit] - np.sqrt(disc[hit]))[:, None] - centre  # unit surface normals
     q = n @ random_rotation(rng).T  # Earth-fixed coordinates: continents do not follow the camera
     mu_s = n @ sun
     mu_v = -np.sum(n * rays[hit], axis=1)  # cosine of the viewing angle (1 at disc centre, 0 at limb)

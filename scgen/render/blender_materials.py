@@ -1,51 +1,26 @@
 """The six spacecraft material classes as Cycles node trees, and the probe material of the aux render.
 
-Base parameters are shared with the Mitsuba backend (scgen/render/mitsuba_materials.py): metals
-are Principled with metallic 1 and their normal-incidence reflectance as base colour.
+Base parameters come from the registry scgen.materials, shared with the Mitsuba backend.
 Details scale with the model's diameter, so any user model gets the same look: MLI foil gets a
 crinkled normal (bumped fractal noise), solar cells a box-projected grid of cells and busbars.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
 
 import numpy as np
 
-from scgen.model import MATERIALS
+from scgen.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
 
-
-@dataclass(frozen=True)
-class Finish:
-    """Principled BSDF inputs of one material class, plus the procedural detail it gets."""
-
-    base: tuple[float, float, float]
-    roughness: float
-    metallic: float = 0.0
-    specular: float = 0.5  # Specular IOR Level: 0.5 is F0 = 0.04 (IOR 1.5); Mitsuba's `specular` 0.6 -> 0.6
-    anisotropic: float = 0.0
-    detail: str = ""  # "crinkle", "cells" or ""
-
-
-FINISHES = {
-    "mli_gold": Finish((1.0, 0.71, 0.29), roughness=0.5, metallic=1.0, detail="crinkle"),
-    "mli_silver": Finish((0.95, 0.93, 0.88), roughness=0.45, metallic=1.0, detail="crinkle"),
-    "brushed_metal": Finish((0.91, 0.92, 0.92), roughness=0.39, metallic=1.0, anisotropic=0.5),
-    "solar_cell": Finish((0.02, 0.03, 0.09), roughness=0.15, specular=0.6, detail="cells"),
-    "dark_metal": Finish((0.05, 0.05, 0.055), roughness=0.4, metallic=0.5),
-    "white_paint": Finish((0.75, 0.75, 0.72), roughness=0.6),
-}
 CRINKLES_PER_DIAMETER = 30.0  # foil wrinkles across the model
-CELLS_PER_DIAMETER = 40.0  # solar cells across the model
-BUSBAR_COLOUR = (0.6, 0.6, 0.62)
 
 
 def build_materials(bpy: ModuleType, diameter: float) -> dict[str, Any]:
     """One bpy material per class in scgen.model.MATERIALS, details sized for a model of `diameter` m."""
     cells = _cell_image(bpy)
-    return {name: _principled(bpy, name, FINISHES[name], diameter, cells) for name in MATERIALS}
+    return {name: _principled(bpy, name, material, diameter, cells) for name, material in MATERIALS.items()}
 
 
 def probe_material(bpy: ModuleType) -> Any:
@@ -68,7 +43,7 @@ def _clear(mat: Any) -> tuple[Any, Any]:
     return nodes, mat.node_tree.links
 
 
-def _principled(bpy: ModuleType, name: str, finish: Finish, diameter: float, cells: Any) -> Any:
+def _principled(bpy: ModuleType, name: str, finish: Material, diameter: float, cells: Any) -> Any:
     mat = bpy.data.materials.new(name)
     nodes, links = _clear(mat)
     bsdf = nodes.new("ShaderNodeBsdfPrincipled")
@@ -92,7 +67,7 @@ def _principled(bpy: ModuleType, name: str, finish: Finish, diameter: float, cel
     elif finish.detail == "cells":
         scale = nodes.new("ShaderNodeVectorMath")
         scale.operation = "SCALE"
-        scale.inputs["Scale"].default_value = CELLS_PER_DIAMETER / diameter
+        scale.inputs["Scale"].default_value = CELLS_PER_SIZE / diameter
         tex = nodes.new("ShaderNodeTexImage")
         tex.image, tex.projection, tex.projection_blend = cells, "BOX", 0.2
         ramp = nodes.new("ShaderNodeValToRGB")

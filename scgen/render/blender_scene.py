@@ -36,13 +36,12 @@ from scgen.render.blender_settings import (
     configure_beauty,
     configure_common,
 )
+from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, render_seed
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.props import prop_mesh
 from scgen.scenes.spec import CameraSpec, PropSpec, SceneSpec
 
 BEAUTY, PROBE, ALONE = "beauty", "probe", "alone"  # view layer names, prefixes of the EXR channels
-EARTHSHINE_COLOUR = (0.8, 0.9, 1.0)  # as the Mitsuba backend
-CLIP_START_M, CLIP_END_M = 1e-3, 1e5
 
 
 class BlenderScene:
@@ -114,7 +113,7 @@ class BlenderScene:
         self.target.matrix_world = self._Matrix(spec.target.matrix.tolist())
         self._set_props(spec.props)
         self._set_lights(spec)
-        self.beauty.cycles.seed = (spec.seed * 1_000_003 + spec.index) % (2**31)
+        self.beauty.cycles.seed = render_seed(spec)
 
     def render_beauty(self) -> dict[str, np.ndarray]:
         return self._render(self.beauty, self.beauty_exr)

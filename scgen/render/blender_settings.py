@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from scgen.errors import ScgenError
+from scgen.render.conventions import check_quality
 
 
 @dataclass(frozen=True)
@@ -41,8 +41,7 @@ SUN_ANGLE_RAD = 0.00925  # 0.53 degrees: the Sun's disc at 1 AU, so shadows stay
 
 
 def preset(quality: str) -> QualityPreset:
-    if quality not in PRESETS:
-        raise ScgenError(f"unknown quality '{quality}' (choose from {', '.join(PRESETS)})")
+    check_quality(quality)
     return PRESETS[quality]
 
 

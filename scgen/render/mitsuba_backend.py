@@ -16,6 +16,7 @@ import numpy as np
 from scgen.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.model import TargetModel
 from scgen.render.backgrounds import background_image, linear_to_srgb8
+from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, check_quality, render_seed
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_materials import box_uv, build_bsdfs, texture_scale
 from scgen.render.props import prop_mesh
@@ -65,6 +66,7 @@ class MitsubaBackend:
         if threads is not None:
             dr.set_thread_count(threads)
         self.model = model
+        check_quality(quality)
         self.spp = QUALITY_SPP[quality]
         self.bsdfs = build_bsdfs()
         self._target_uv = [
@@ -108,7 +110,7 @@ class MitsubaBackend:
         geo_props = self._geometry_scene(props) if props else None
 
         W, H = spec.camera.width, spec.camera.height
-        rays_cam = _pixel_rays(spec.camera.K_mat, W, H)
+        rays_cam = spec.camera.pixel_directions().reshape(-1, 3)
         t_all, idx_all, normal = _cast(geo_all, target + props, rays_cam)
         t_tgt, _, _ = _cast(geo_target, [], rays_cam)
         z_scale = rays_cam[:, 2]
@@ -158,8 +160,8 @@ class MitsubaBackend:
                 "fov_axis": "x",
                 "principal_point_offset_x": ((cam.width - 1) / 2 - K[0, 2]) / cam.width,
                 "principal_point_offset_y": ((cam.height - 1) / 2 - K[1, 2]) / cam.height,
-                "near_clip": 1e-3,
-                "far_clip": 1e4,
+                "near_clip": CLIP_START_M,
+                "far_clip": CLIP_END_M,
                 "to_world": mi.ScalarTransform4f().scale([-1, -1, 1]),
                 "film": {
                     "type": "hdrfilm",
@@ -182,23 +184,15 @@ class MitsubaBackend:
             d["earthshine"] = {
                 "type": "directional",
                 "direction": [-float(x) for x in direction],
-                "irradiance": {"type": "rgb", "value": [0.8 * irradiance, 0.9 * irradiance, irradiance]},
+                "irradiance": {"type": "rgb", "value": [c * irradiance for c in EARTHSHINE_COLOUR]},
             }
         for k, s in enumerate(shapes):
             d[f"s{k:03d}"] = s
         scene = mi.load_dict(d)
-        seed = (spec.seed * 1_000_003 + spec.index) % (2**31)
-        img = np.asarray(mi.render(scene, seed=seed), dtype=np.float32)
+        img = np.asarray(mi.render(scene, seed=render_seed(spec)), dtype=np.float32)
         fg, alpha = img[..., :3], img[..., 3:4]
         composite = fg + (1.0 - np.clip(alpha, 0, 1)) * background_image(spec)
         return linear_to_srgb8(composite)
-
-
-def _pixel_rays(K: np.ndarray, W: int, H: int) -> np.ndarray:
-    """Unit ray directions through every pixel centre, camera frame, row-major (H*W x 3)."""
-    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
-    d = np.stack([u.ravel(), v.ravel(), np.ones(H * W)], 1) @ np.linalg.inv(K).T
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
 def _cast(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

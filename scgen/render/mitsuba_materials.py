@@ -1,7 +1,7 @@
 """Spacecraft material classes as Mitsuba BSDFs, with procedural, deterministic detail textures.
 
-Base parameters match the Blender backend's finishes (principled, metals with metallic 1 and their
-normal-incidence reflectance as base colour): crinkled MLI foil (a tileable ridged normal map),
+Base parameters come from the registry scgen.materials, as for the Blender backend; the details are
+this backend's: crinkled MLI foil (a tileable ridged normal map),
 solar cells (a grid of cells and busbars), anisotropic brushed metal, paint, dark metal.
 Textures are laid on by box projection in the object's own frame, sized by the object's size.
 Only shading changes: the geometry (and so every label) is the same triangles as before.
@@ -14,11 +14,9 @@ from typing import Any
 import mitsuba as mi
 import numpy as np
 
-MLI = {"mli_gold": ((1.0, 0.71, 0.29), 0.5), "mli_silver": ((0.95, 0.93, 0.88), 0.45)}  # colour, roughness
+from scgen.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS
+
 CRINKLE_TILES_PER_SIZE = 2.0  # a tile spans half the object: no visible repetition on a face
-CELLS_PER_SIZE = 40.0  # solar cells across the object
-BUSBAR_COLOUR = (0.6, 0.6, 0.62)
-CELL_COLOUR = (0.02, 0.03, 0.09)
 TEXTURE_SEED = 2024  # the detail textures are fixed assets, identical for every sample
 
 
@@ -45,7 +43,7 @@ def crinkle_normal_map(size: int = 512, waves: int = 64, slope: float = 0.02) ->
 
 def cell_texture(size: int = 64) -> np.ndarray:
     """One solar cell (a tile): dark blue with a light frame and two busbars, linear RGB."""
-    tex = np.tile(np.asarray(CELL_COLOUR, np.float32), (size, size, 1))
+    tex = np.tile(np.asarray(MATERIALS["solar_cell"].base, np.float32), (size, size, 1))
     line = max(1, size // 32)
     for a in (slice(0, line), slice(size - line, size)):
         tex[a, :] = BUSBAR_COLOUR
@@ -68,14 +66,14 @@ def _principled(base: Any, roughness: float, metallic: float = 0.0, **extra: flo
 def build_bsdfs() -> dict[str, mi.BSDF]:
     """One BSDF object per material class, built once per backend and shared by every mesh."""
     crinkle = _bitmap(crinkle_normal_map(), raw=True)
-    dicts = {
-        name: {"type": "normalmap", "normalmap": crinkle, "bsdf": _principled(colour, roughness, 1.0)}
-        for name, (colour, roughness) in MLI.items()
-    }
-    dicts["brushed_metal"] = _principled((0.91, 0.92, 0.92), 0.39, 1.0, anisotropic=0.5)
-    dicts["solar_cell"] = _principled(_bitmap(cell_texture(), raw=False), 0.15, specular=0.6)
-    dicts["dark_metal"] = _principled((0.05, 0.05, 0.055), 0.4, 0.5)
-    dicts["white_paint"] = _principled((0.75, 0.75, 0.72), 0.6)
+    cells = _bitmap(cell_texture(), raw=False)
+    dicts = {}
+    for name, m in MATERIALS.items():
+        base = cells if m.detail == "cells" else m.base
+        bsdf = _principled(base, m.roughness, m.metallic, specular=m.specular, anisotropic=m.anisotropic)
+        dicts[name] = (
+            {"type": "normalmap", "normalmap": crinkle, "bsdf": bsdf} if m.detail == "crinkle" else bsdf
+        )
     return {name: mi.load_dict(d) for name, d in dicts.items()}
 
 

@@ -16,11 +16,10 @@ from typing import Any
 import yaml
 
 from scgen.errors import ScgenError
+from scgen.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
+from scgen.scenes.spec import CameraSpec
 
-ILLUMINATION_LEVELS = ("weak", "normal", "strong")
-BACKGROUND_KINDS = ("clean", "complex", "earth", "cluttered")
 USER_BACKGROUND = "user"  # the user's own images (background.user_dir); not a group of the paper
-OCCLUSION_GROUPS = ("none", "slight", "moderate", "heavy")
 USER_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 # Every key is documented in docs/config.md.
@@ -304,5 +303,5 @@ def distance_range_m(cfg: dict[str, Any], diameter_m: float) -> tuple[float, flo
     dist = cfg["distance"]
     if dist["range_m"] is not None:
         return float(dist["range_m"][0]), float(dist["range_m"][1])
-    f = 0.5 * (cfg["camera"]["fx"] + cfg["camera"]["fy"])
+    f = CameraSpec.from_config(cfg["camera"]).focal
     return f * diameter_m / dist["max_px"], f * diameter_m / dist["min_px"]

@@ -47,6 +47,23 @@ def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(n, u)
 
 
+def focal_length(K: np.ndarray) -> float:
+    """Mean focal length in pixels: a size s at depth z projects to about focal * s / z pixels."""
+    return 0.5 * (K[0, 0] + K[1, 1])
+
+
+def unit_sphere_hits(rays: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Unit rays (N x 3, from the origin) against the unit sphere at `centre`: (hit, normals, b, disc).
+
+    Ray s * r meets the sphere at s = b -+ sqrt(disc); `hit` = disc > 0; `normals` are the outward
+    unit normals at the near hits (one per hit ray); disc < 0 measures how far a ray passes outside.
+    """
+    b = rays @ centre
+    disc = b * b - (centre @ centre - 1.0)
+    hit = disc > 0
+    return hit, rays[hit] * (b[hit] - np.sqrt(disc[hit]))[:, None] - centre, b, disc
+
+
 def backproject(K: np.ndarray, u: float, v: float, z: float) -> np.ndarray:
     """Camera-frame point at depth z (along the optical axis) seen at pixel centre (u, v)."""
     return z * np.linalg.solve(K, np.array([u, v, 1.0]))

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from scgen.scenes.geometry import backproject, look_rotation, random_rotation
+from scgen.scenes.geometry import backproject, focal_length, look_rotation, random_rotation
 from scgen.scenes.props import bounding_radius, local_pieces, unit_extents
 from scgen.scenes.silhouette import CameraView, SunView
 from scgen.scenes.spec import Pose, PropSpec
@@ -83,7 +83,7 @@ def place_occluder(
     `size_rel` target radii; it grows when even a centred placement stays below the goal.
     """
     K = view.K
-    f = 0.5 * (K[0, 0] + K[1, 1])
+    f = focal_length(K)
     rel = rng.uniform(*cfg["size_rel"])
     frac = rng.uniform(*cfg["depth_frac"])
     phi = rng.uniform(0.0, 2 * np.pi)

@@ -6,12 +6,14 @@ from typing import Any
 
 import numpy as np
 
+from scgen.materials import PROP_MATERIALS
 from scgen.scenes.config import USER_BACKGROUND, distance_range_m
 from scgen.scenes.geometry import (
     backproject,
     orthonormal_basis,
     random_direction_in_cone,
     random_rotation,
+    unit_sphere_hits,
 )
 from scgen.scenes.placement import Blank, place_caster, place_occluder
 from scgen.scenes.rng import factor_rng
@@ -21,7 +23,6 @@ from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, PropSpec, SceneS
 OCCLUDER_SHAPES = ("panel", "box", "rod", "debris", "arm")
 CASTER_SHAPES = ("panel", "box", "truss", "arm")
 CLUTTER_SHAPES = ("truss", "panel", "box", "debris", "arm")
-PROP_MATERIALS = ("white_paint", "brushed_metal", "mli_silver", "dark_metal", "mli_gold", "solar_cell")
 EARTH_MIN_LIT = 0.08  # share of the frame an Earth background must show as lit day side
 EARTH_TRIES = 32
 
@@ -32,24 +33,16 @@ def _choice(rng: np.random.Generator, probs: dict[str, float]) -> str:
     return names[int(rng.choice(len(names), p=p / p.sum()))]
 
 
-def camera_from_config(cfg: dict[str, Any]) -> CameraSpec:
-    c = cfg["camera"]
-    K = (c["fx"], 0.0, c["cx"], 0.0, c["fy"], c["cy"], 0.0, 0.0, 1.0)
-    return CameraSpec(c["width"], c["height"], tuple(float(k) for k in K), float(c["exposure_ev"]))
-
-
-def sample_scene(
-    seed: int, index: int, cfg: dict[str, Any], diameter_m: float, shape: TargetShape | None = None
-) -> SceneSpec:
+def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape) -> SceneSpec:
     """The SceneSpec of one sample; depends only on (seed, index, cfg, target geometry).
 
-    `shape` is the target's silhouette geometry (TargetShape.from_mesh(model.mesh)), used to aim
-    occluders and shadow casters; without it a ball of `diameter_m` stands in and the aim is rougher.
+    `shape` is the target's geometry (scgen.Generator builds it from the model): its diameter sets the
+    distance range, its silhouette aims the occluders and shadow casters.
     """
-    shape = shape or TargetShape.ball(diameter_m)
-    camera = camera_from_config(cfg)
+    diameter_m = shape.diameter
+    camera = CameraSpec.from_config(cfg["camera"])
     K = camera.K_mat
-    f = 0.5 * (K[0, 0] + K[1, 1])
+    f = camera.focal
 
     R = random_rotation(factor_rng(seed, index, "pose"))
 
@@ -76,7 +69,7 @@ def sample_scene(
         factor_rng(seed, index, "occluders"), cfg["occluders"], view, t, shape.radius
     )
     caster = _sample_shadow_caster(
-        factor_rng(seed, index, "shadow"), cfg["shadow"], view, t, sun_dir, shape, target_cam, diameter_m
+        factor_rng(seed, index, "shadow"), cfg["shadow"], view, t, sun_dir, shape, target_cam
     )
     return SceneSpec(
         seed=int(seed),
@@ -102,14 +95,14 @@ def _sample_sun(rng: np.random.Generator, cfg: dict[str, Any], t: np.ndarray) ->
 
 def _sample_shadow_caster(
     rng: np.random.Generator, cfg: dict[str, Any], view: CameraView | None, t: np.ndarray,
-    sun_dir: np.ndarray, shape: TargetShape, target_cam: list[np.ndarray], diameter: float,
+    sun_dir: np.ndarray, shape: TargetShape, target_cam: list[np.ndarray],
 ) -> list[PropSpec]:  # fmt: skip
     """With probability caster_prob, a prop on the sun side aimed to shade part of the target."""
     if rng.uniform() >= cfg["caster_prob"] or view is None:
         return []
     sun = sun_view(np.stack(orthonormal_basis(sun_dir)), t, shape.radius, target_cam)
     blank = Blank.draw(rng, "shadow_caster", CASTER_SHAPES, PROP_MATERIALS, facing=sun_dir)
-    prop = place_caster(rng, cfg, view, sun, t, sun_dir, shape.radius, diameter, blank)
+    prop = place_caster(rng, cfg, view, sun, t, sun_dir, shape.radius, shape.diameter, blank)
     return [prop] if prop is not None else []
 
 
@@ -138,16 +131,14 @@ def _sample_background(
         images = cfg["user_images"]
         params = {"image": images[int(rng.integers(len(images)))]}
     elif kind == "cluttered":
-        K = camera.K_mat
-        f = 0.5 * (K[0, 0] + K[1, 1])
         n = int(rng.integers(cfg["clutter_count"][0], cfg["clutter_count"][1] + 1))
         for _ in range(n):
             blank = Blank.draw(rng, "clutter", CLUTTER_SHAPES, PROP_MATERIALS)
             depth = t[2] * rng.uniform(*cfg["clutter_depth_factor"])
             u, v = rng.uniform(0, camera.width - 1), rng.uniform(0, camera.height - 1)
-            half = rng.uniform(*cfg["clutter_size_rel"]) * radius_px * depth / f
+            half = rng.uniform(*cfg["clutter_size_rel"]) * radius_px * depth / camera.focal
             depth = max(depth, t[2] + radius + blank.bound * half)  # wholly behind the target
-            clutter.append(blank.spec(half, backproject(K, u, v, depth)))
+            clutter.append(blank.spec(half, camera.backproject(u, v, depth)))
     return BackgroundSpec(kind, bg_seed, params), clutter
 
 
@@ -163,7 +154,7 @@ def _sample_earth(
     K = camera.K_mat
     half_diag = np.arctan(np.hypot(0.5 * camera.width / K[0, 0], 0.5 * camera.height / K[1, 1]))
     v, u = np.mgrid[0 : camera.height : camera.height / 12, 0 : camera.width : camera.width / 16]
-    rays = np.stack([(u.ravel() - K[0, 2]) / K[0, 0], (v.ravel() - K[1, 2]) / K[1, 1], np.ones(u.size)], 1)
+    rays = camera.rays(u.ravel(), v.ravel())
     rays /= np.linalg.norm(rays, axis=1, keepdims=True)
     x, y = orthonormal_basis(np.array([0.0, 0.0, 1.0]))
     best: tuple[float, dict[str, Any]] = (-1.0, {})
@@ -188,8 +179,5 @@ def _sample_earth(
 
 def _earth_lit_share(rays: np.ndarray, centre: np.ndarray, sun_dir: np.ndarray) -> float:
     """Share of the probe rays that see the unit sphere at `centre` on its day side."""
-    b = rays @ centre
-    disc = b * b - (centre @ centre - 1.0)
-    hit = disc > 0
-    normal = rays[hit] * (b[hit] - np.sqrt(disc[hit]))[:, None] - centre
+    _, normal, _, _ = unit_sphere_hits(rays, centre)
     return float(np.sum(normal @ sun_dir > 0.15) / len(rays))

@@ -29,22 +29,19 @@ class TargetShape:
 
     pieces: tuple[np.ndarray, ...]
     radius: float  # largest distance of a vertex from the model origin
+    diameter: float  # the model's diameter (largest vertex distance), as in models_info
 
     @staticmethod
-    def from_mesh(mesh: trimesh.Trimesh) -> TargetShape:
+    def from_mesh(mesh: trimesh.Trimesh, diameter: float) -> TargetShape:
+        """The shape of a target mesh (TargetModel.mesh) with its diameter (TargetModel.diameter)."""
         pieces = []
         for comp in mesh.split(only_watertight=False):
             v = np.unique(np.asarray(comp.vertices, np.float64), axis=0)
             if len(v) > 8:
                 v = np.asarray(trimesh.convex.convex_hull(v).vertices)
             pieces.append(v)
-        return TargetShape(tuple(pieces), float(max(np.linalg.norm(p, axis=1).max() for p in pieces)))
-
-    @staticmethod
-    def ball(diameter: float) -> TargetShape:
-        """A ball stand-in when only the diameter is known."""
-        v = np.asarray(trimesh.creation.icosphere(subdivisions=2, radius=0.5 * diameter).vertices)
-        return TargetShape((v,), 0.5 * diameter)
+        radius = float(max(np.linalg.norm(p, axis=1).max() for p in pieces))
+        return TargetShape(tuple(pieces), radius, float(diameter))
 
     def in_camera(self, R: np.ndarray, t: np.ndarray) -> list[np.ndarray]:
         return [p @ R.T + t for p in self.pieces]

@@ -11,6 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from scgen.scenes.geometry import backproject, focal_length, project
+
 
 @dataclass(frozen=True)
 class Pose:
@@ -52,6 +54,40 @@ class CameraSpec:
     @property
     def K_mat(self) -> np.ndarray:
         return np.asarray(self.K, dtype=np.float64).reshape(3, 3)
+
+    @staticmethod
+    def from_config(camera: dict[str, Any]) -> CameraSpec:
+        """From the config's camera section (resolved: cx, cy filled in)."""
+        c = camera
+        K = (c["fx"], 0.0, c["cx"], 0.0, c["fy"], c["cy"], 0.0, 0.0, 1.0)
+        return CameraSpec(c["width"], c["height"], tuple(float(k) for k in K), float(c["exposure_ev"]))
+
+    @property
+    def focal(self) -> float:
+        """Mean focal length (px): projected size = focal * size / depth."""
+        return focal_length(self.K_mat)
+
+    def rays(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Camera-frame rays K^-1 [u, v, 1] (z = 1) through pixel positions (..., 3); centres at integers."""
+        return np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(self.K_mat).T
+
+    def pixel_rays(self) -> np.ndarray:
+        """Rays (z = 1) through every pixel centre, H x W x 3, float64."""
+        v, u = np.mgrid[0 : self.height, 0 : self.width].astype(np.float64)
+        return self.rays(u, v)
+
+    def pixel_directions(self) -> np.ndarray:
+        """Unit camera-frame directions through every pixel centre, H x W x 3, float64."""
+        rays = self.pixel_rays()
+        return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+
+    def project(self, X: np.ndarray) -> np.ndarray:
+        """Pixel coordinates (N x 2) of camera-frame points X (N x 3)."""
+        return project(self.K_mat, X)
+
+    def backproject(self, u: float, v: float, z: float) -> np.ndarray:
+        """The camera-frame point at depth z seen at pixel (u, v)."""
+        return backproject(self.K_mat, u, v, z)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,78 @@
+"""The scene factors of the paper's robustness table: their groups, thresholds and combination key.
+
+One home for the vocabulary the sampler draws from, the annotator measures, the split planner keys
+on, `scgen stats` counts and `scgen preview` prints.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from scgen.splits import viewpoint_cell
+
+if TYPE_CHECKING:
+    from scgen.scenes.spec import SceneSpec
+
+ILLUMINATION_LEVELS = ("weak", "normal", "strong")
+SHADOW_LABELS = ("no", "yes")
+OCCLUSION_GROUPS = ("none", "slight", "moderate", "heavy")
+BACKGROUND_KINDS = ("clean", "complex", "earth", "cluttered")
+DISTANCE_GROUPS = ("near", "middle", "far")
+FACTOR_GROUPS: dict[str, tuple[str, ...]] = {
+    "illumination": ILLUMINATION_LEVELS,
+    "shadow": SHADOW_LABELS,
+    "occlusion": OCCLUSION_GROUPS,
+    "background": BACKGROUND_KINDS,
+    "distance": DISTANCE_GROUPS,
+}
+
+SHADOW_THRESHOLD = 0.05  # shadow label "yes" when >= 5 % of the lit, visible target is in cast shadow
+OCCLUSION_LIMITS = (("none", 0.0), ("slight", 0.2), ("moderate", 0.4))  # r_occ upper bounds; above: heavy
+
+
+def shadow_label(shadow_fraction: float) -> str:
+    return SHADOW_LABELS[int(shadow_fraction >= SHADOW_THRESHOLD)]
+
+
+def occlusion_group(r_occ: float) -> str:
+    """The paper's groups: none (r_occ = 0), slight (<= 0.2), moderate (<= 0.4), heavy (> 0.4)."""
+    for name, limit in OCCLUSION_LIMITS:
+        if r_occ <= limit:
+            return name
+    return OCCLUSION_GROUPS[-1]
+
+
+def distance_groups(
+    distances: np.ndarray, lo: float | None = None, hi: float | None = None
+) -> tuple[list[str], list[float]]:
+    """near / middle / far by thirds of [lo, hi] of the camera-target distance |t| (m).
+
+    lo/hi default to the range of `distances` (scgen stats: over a split); `scgen preview` passes the
+    config's range. Returns the labels and the edges [lo, 1/3, 2/3, hi].
+    """
+    if len(distances) == 0:
+        return [], []
+    lo = float(distances.min()) if lo is None else lo
+    hi = float(distances.max()) if hi is None else hi
+    edges = [lo, lo + (hi - lo) / 3, lo + 2 * (hi - lo) / 3, hi]
+    idx = np.clip(np.searchsorted(edges[1:3], distances, side="right"), 0, 2)
+    return [DISTANCE_GROUPS[i] for i in idx], edges
+
+
+def occluder_config(spec: SceneSpec) -> str:
+    """The occluder part of the combination key: requested group and the occluders' shapes."""
+    shapes = "+".join(sorted(p.shape for p in spec.occluders)) or "-"
+    return f"{spec.requested_occlusion}:{shapes}"
+
+
+def combination_key(cell: int, illumination: str, background: str, occluder_config: str) -> str:
+    """The factor-combination key: viewpoint cell, illumination level, background, occluder config."""
+    return f"v{cell:02d}|{illumination}|{background}|{occluder_config}"
+
+
+def spec_key(spec: SceneSpec) -> str:
+    """The factor-combination key of a sample, from its SceneSpec."""
+    cell = viewpoint_cell(spec.target.R_mat, spec.target.t_vec)
+    return combination_key(cell, spec.sun.level, spec.background.kind, occluder_config(spec))

@@ -1,0 +1,24 @@
+"""What both renderers must agree on: quality names, per-sample render seeds, clip range, Earthshine tint.
+
+Each backend translates these into its own settings (Cycles presets, Mitsuba sample counts); keeping
+the facts here means a Blender and a Mitsuba render of one SceneSpec differ only by the renderer.
+"""
+
+from __future__ import annotations
+
+from scgen.errors import ScgenError
+from scgen.scenes.spec import SceneSpec
+
+QUALITIES = ("draft", "default", "high")
+CLIP_START_M, CLIP_END_M = 1e-3, 1e5  # camera clip range: scenes span millimetres to a few metres
+EARTHSHINE_COLOUR = (0.8, 0.9, 1.0)  # sunlight reflected by the Earth: bluish (per-channel factor)
+
+
+def check_quality(quality: str) -> None:
+    if quality not in QUALITIES:
+        raise ScgenError(f"unknown quality '{quality}' (choose from {', '.join(QUALITIES)})")
+
+
+def render_seed(spec: SceneSpec) -> int:
+    """The path tracer's seed for one sample: fixed by (dataset seed, index), so re-renders are identical."""
+    return (spec.seed * 1_000_003 + spec.index) % (2**31)
