@@ -22,7 +22,7 @@ from torch.utils.data import DataLoader
 
 from posenet.config import load_config
 from posenet.data import PoseDataset, open_split
-from posenet.models import build_model
+from posenet.models import create_model
 from posenet.train import make_optimizer, pm_loss_points, train_step, worker_init
 from scgen.runner import RenderJob, run_render
 
@@ -68,7 +68,7 @@ def step_time(data: Path, config: str, variant: str | None, steps: int) -> tuple
     bs = cfg.optim.batch_size
     items = [ds[(0, i % len(ds))] for i in range(bs)]
     batch = {k: torch.stack([it[k] for it in items]).to(device) for k in items[0]}
-    model = build_model(cfg.variant, mc).to(device).train()
+    model = create_model(cfg.variant, cfg.preset, **cfg.model).to(device).train()
     opt, _ = make_optimizer(model, cfg.optim, total_iters=steps + 2)
     pm = pm_loss_points(ds.obj, device)
     times = []

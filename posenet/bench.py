@@ -2,18 +2,15 @@
 
 from __future__ import annotations
 
-import json
 import statistics
 import time
-from dataclasses import asdict, dataclass
-from pathlib import Path
+from dataclasses import dataclass
 
-import click
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from posenet.errors import PosenetError
-from posenet.models import VARIANTS, ModelConfig, PoseNet, build_model
+from posenet.models import ModelConfig, PoseNet, create_model
 
 
 @dataclass(frozen=True)
@@ -91,10 +88,10 @@ def measure_latency_ms(
     return 1000 * statistics.median(times)
 
 
-def bench_variant(name: str, config: ModelConfig, device: torch.device, warmup: int, iters: int) -> BenchRow:
-    """Build `name` from random init and measure it in eval mode."""
-    model = build_model(name, config).to(device).eval()
-    inputs = dummy_inputs(config, device)
+def bench_variant(name: str, preset: str, device: torch.device, warmup: int, iters: int) -> BenchRow:
+    """Build variant `name` in `preset`'s configuration from random init and measure it in eval mode."""
+    model = create_model(name, preset).to(device).eval()
+    inputs = dummy_inputs(model.config, device)
     params = sum(p.numel() for p in model.parameters())
     macs = count_macs(model, inputs)
     latency = measure_latency_ms(model, inputs, warmup, iters)
@@ -107,8 +104,7 @@ def run_bench(
     """Bench each variant in turn, freeing it before the next."""
     rows = []
     for name in names:
-        config = ModelConfig.smoke(name) if smoke else ModelConfig.paper(name)
-        rows.append(bench_variant(name, config, device, warmup, iters))
+        rows.append(bench_variant(name, "smoke" if smoke else "paper", device, warmup, iters))
         if device.type == "cuda":
             torch.cuda.empty_cache()
     return rows
@@ -143,38 +139,3 @@ def format_report(rows: list[BenchRow], device: str, paper: dict[str, BenchRow] 
             ratio += f" (paper {paper['gap-gdrnet'].latency_ms / paper['gdrnet'].latency_ms:.2f}, GPU)"
         lines.append(ratio)
     return "\n".join(lines)
-
-
-@click.command("bench")
-@click.option(
-    "--variant",
-    "variants",
-    multiple=True,
-    type=click.Choice(list(VARIANTS)),
-    help="Variant to bench (repeatable); default: all.",
-)
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
-@click.option("--warmup", type=click.IntRange(min=0), default=3, show_default=True, help="Untimed forwards.")
-@click.option("--iters", type=click.IntRange(min=1), default=10, show_default=True, help="Timed forwards.")
-@click.option("--threads", type=click.IntRange(min=1), help="CPU intra-op threads (default: torch's).")
-@click.option("--smoke", is_flag=True, help="Bench the reduced-width CPU presets instead of the paper's.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Also write JSON.")
-def bench(
-    variants: tuple[str, ...],
-    device: str,
-    warmup: int,
-    iters: int,
-    threads: int | None,
-    smoke: bool,
-    json_path: Path | None,
-) -> None:
-    """Params, MACs and batch-1 latency / FPS of the pose-network variants, from random init."""
-    if threads:
-        torch.set_num_threads(threads)
-    dev = resolve_device(device)
-    rows = run_bench(list(variants or VARIANTS), dev, warmup, iters, smoke)
-    label = device_label(dev)
-    click.echo(format_report(rows, label, paper={} if smoke else PAPER))
-    if json_path:
-        payload = {"device": label, "variants": [asdict(r) for r in rows]}
-        json_path.write_text(json.dumps(payload, indent=2) + "\n")

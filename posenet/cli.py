@@ -4,21 +4,26 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import asdict
 from pathlib import Path
 
 import click
+import cv2
+import torch
 
-from posenet.bench import bench
+from posenet.bench import PAPER, device_label, format_report, resolve_device, run_bench
 from posenet.config import load_config
 from posenet.data.boxes import boxes_from_gt
 from posenet.data.layout import scan_split
 from posenet.errors import PosenetError
+from posenet.evaluate import BATCH_SIZE, evaluate, format_table
 from posenet.evaluate import by_factor as run_by_factor
-from posenet.evaluate import evaluate, format_table
+from posenet.models import VARIANTS
 from posenet.train import train as run_train
-from posenet.viz import viz
+from posenet.viz import heatmap_panel, overlay_panel
 from scgen.atomic import atomic_write_text
 from scgen.cli_errors import one_line_errors
+from scgen.errors import ScgenError
 
 PATH = click.Path(path_type=Path)
 
@@ -52,7 +57,7 @@ def main() -> None:
 @click.option(
     "--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config is given)."
 )
-@one_line_errors(PosenetError)
+@one_line_errors(PosenetError, ScgenError)
 def train(
     data: Path,
     out: Path,
@@ -90,7 +95,14 @@ def train(
     "--by-factor", type=PATH, default=None, help="Sample-groups file: per-group ADD@0.02 m (Table 5)."
 )
 @click.option("--workers", type=click.IntRange(min=0), default=2, show_default=True, help="Loader processes.")
-@one_line_errors(PosenetError)
+@click.option(
+    "--batch-size",
+    type=click.IntRange(min=1),
+    default=BATCH_SIZE,
+    show_default=True,
+    help="RoIs per forward (the results do not depend on it; latency is timed apart at batch 1).",
+)
+@one_line_errors(PosenetError, ScgenError)
 def eval_cmd(
     data: Path,
     ckpt: tuple[Path, ...],
@@ -100,10 +112,11 @@ def eval_cmd(
     predictions: Path | None,
     by_factor: Path | None,
     workers: int,
+    batch_size: int,
 ) -> None:
     """Rotation/translation error, ADD@0.02 m, ADD@0.1d, ADD-S@0.1d, ESA score and batch-1 latency."""
     if by_factor is not None:
-        res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers)
+        res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers, batch_size)
         cols = res["columns"]
         rows = [
             [f"{factor}/{group}", str(res["n"][factor][group]), *(_percent(vals[c]) for c in cols)]
@@ -116,7 +129,7 @@ def eval_cmd(
         return
     if len(ckpt) != 1:
         raise PosenetError("several --ckpt are only compared with --by-factor")
-    result = evaluate(data, ckpt[0], split, boxes, workers=workers)
+    result = evaluate(data, ckpt[0], split, boxes, workers=workers, batch_size=batch_size)
     s = result.summary
     rows = [
         ["samples", f"{s['n']}"],
@@ -151,7 +164,7 @@ def eval_cmd(
               help="Relative std of centre shift and log size change (0: exact GT boxes).")  # fmt: skip
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--obj-id", type=int, default=1, show_default=True)
-@one_line_errors(PosenetError)
+@one_line_errors(PosenetError, ScgenError)
 def boxes(data: Path, out: Path, split: str, noise: float, seed: int, obj_id: int) -> None:
     """Write one box per image of a split from the GT full-object boxes, optionally perturbed."""
     entries = boxes_from_gt([i for i in scan_split(data, split, obj_id) if i.px_count_visib > 0], noise, seed)
@@ -159,8 +172,66 @@ def boxes(data: Path, out: Path, split: str, noise: float, seed: int, obj_id: in
     click.echo(f"{len(entries)} boxes -> {out}")
 
 
-main.add_command(bench)
-main.add_command(viz)
+@main.command("bench")
+@click.option(
+    "--variant",
+    "variants",
+    multiple=True,
+    type=click.Choice(list(VARIANTS)),
+    help="Variant to bench (repeatable); default: all.",
+)
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--warmup", type=click.IntRange(min=0), default=3, show_default=True, help="Untimed forwards.")
+@click.option("--iters", type=click.IntRange(min=1), default=10, show_default=True, help="Timed forwards.")
+@click.option("--threads", type=click.IntRange(min=1), help="CPU intra-op threads (default: torch's).")
+@click.option("--smoke", is_flag=True, help="Bench the reduced-width CPU presets instead of the paper's.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Also write JSON.")
+def bench(
+    variants: tuple[str, ...],
+    device: str,
+    warmup: int,
+    iters: int,
+    threads: int | None,
+    smoke: bool,
+    json_path: Path | None,
+) -> None:
+    """Params, MACs and batch-1 latency / FPS of the pose-network variants, from random init."""
+    if threads:
+        torch.set_num_threads(threads)
+    dev = resolve_device(device)
+    rows = run_bench(list(variants or VARIANTS), dev, warmup, iters, smoke)
+    label = device_label(dev)
+    click.echo(format_report(rows, label, paper={} if smoke else PAPER))
+    if json_path:
+        payload = {"device": label, "variants": [asdict(r) for r in rows]}
+        json_path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
+@main.command()
+@click.option("--data", type=click.Path(path_type=Path), required=True, help="Dataset folder.")
+@click.option(
+    "--ckpt",
+    "ckpts",
+    type=click.Path(path_type=Path, exists=True),
+    multiple=True,
+    required=True,
+    help="Checkpoint; repeat to compare models side by side.",
+)
+@click.option("--samples", required=True, help="Comma-separated sample ids (im_id), e.g. 3,17,42.")
+@click.option("--split", default="test", show_default=True)
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for the PNGs.")
+@one_line_errors(PosenetError, ScgenError)
+def viz(data: Path, ckpts: tuple[Path, ...], samples: str, split: str, out: Path) -> None:
+    """Pose overlays (predicted green vs GT white contour) and feature-response heat maps, as PNGs."""
+    try:
+        ids = [int(s) for s in samples.split(",") if s.strip()]
+    except ValueError as exc:
+        raise PosenetError(f"--samples must be comma-separated integers, got '{samples}'") from exc
+    out.mkdir(parents=True, exist_ok=True)
+    for name, panel in (("poses.png", overlay_panel(data, split, list(ckpts), ids)),
+                        ("features.png", heatmap_panel(data, split, list(ckpts), ids))):  # fmt: skip
+        cv2.imwrite(str(out / name), panel)
+        click.echo(f"wrote {out / name}")
 
 
 if __name__ == "__main__":  # `python -m posenet.cli`, e.g. under `torchrun -m`

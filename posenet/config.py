@@ -8,9 +8,10 @@ A config file (YAML or TOML) may name a base `preset` (paper or smoke) and overr
     data: {workers: 2, bg_prob: 0.0}
     optim: {epochs: 20, lr: 1.0e-3}
 
-The variant fixes the modules (ggca, mecs, pgsa) and the backbone family; `model` overrides the other
-ModelConfig fields of the preset. `to_dict()` is what is saved as OUT/config.yaml; it reloads to the
-same configuration.
+`preset`, `variant` and `model` are the arguments of `posenet.models.create_model(variant, preset,
+**model)`: the variant fixes the modules (ggca, mecs, pgsa) and the backbone family, `model` overrides
+any ModelConfig field of the preset without changing the variant. `to_dict()` is what is saved as
+OUT/config.yaml; it reloads to the same configuration.
 """
 
 from __future__ import annotations
@@ -24,10 +25,7 @@ from typing import Any
 import yaml
 
 from posenet.errors import PosenetError
-from posenet.models import VARIANTS, ModelConfig
-
-PRESETS = ("paper", "smoke")
-VARIANT_FIELDS = ("ggca", "mecs", "pgsa")  # set by the variant; the backbone may change within its family
+from posenet.models import PRESETS, ModelConfig
 
 
 @dataclass
@@ -87,20 +85,14 @@ class OptimConfig:
 class TrainConfig:
     preset: str = "paper"
     variant: str = "gdrnet"
-    model: dict[str, Any] = field(default_factory=dict)
+    model: dict[str, Any] = field(default_factory=dict)  # ModelConfig field overrides of create_model
     data: DataConfig = field(default_factory=DataConfig)
     loss: LossConfig = field(default_factory=LossConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
 
     def model_config(self) -> ModelConfig:
-        """The network's configuration: the preset of the variant with `model` overrides."""
-        base = ModelConfig.smoke if self.preset == "smoke" else ModelConfig.paper
-        try:
-            return base(
-                self.variant, **{k: tuple(v) if isinstance(v, list) else v for k, v in self.model.items()}
-            )
-        except TypeError as exc:
-            raise PosenetError(f"bad model config: {exc}") from exc
+        """The configuration `create_model(variant, preset, **model)` builds (validated there)."""
+        return ModelConfig.create(self.variant, self.preset, **self.model)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON/YAML-able; `resolved_model` (every ModelConfig field) is informational, ignored on load."""
@@ -120,7 +112,7 @@ def _plain(value: Any) -> Any:
 
 
 def smoke_config() -> TrainConfig:
-    """Reduced CPU preset: ModelConfig.smoke, small batches, short warmup, few loader processes."""
+    """Reduced CPU preset: the smoke model preset, small batches, short warmup, few loader processes."""
     return TrainConfig(
         preset="smoke",
         data=DataConfig(workers=2, bg_pool_size=8),
@@ -146,16 +138,14 @@ def config_from_dict(raw: dict[str, Any]) -> TrainConfig:
     """A TrainConfig from a file's (or a checkpoint's) dict: the named preset, then every given field."""
     raw = dict(raw)
     preset = raw.pop("preset", "paper")
-    if preset not in PRESETS:
-        raise PosenetError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
-    cfg = smoke_config() if preset == "smoke" else TrainConfig()
+    # another name than smoke keeps the paper's training values; ModelConfig.create refuses unknown ones
+    cfg = smoke_config() if preset == "smoke" else TrainConfig(preset=preset)
     for key, value in raw.items():
         if key in ("data", "loss", "optim"):
             setattr(cfg, key, _override(getattr(cfg, key), value, key))
         elif key == "model":
-            if not isinstance(value, dict) or set(value) & set(VARIANT_FIELDS):
-                fixed = ", ".join(VARIANT_FIELDS)
-                raise PosenetError(f"config 'model' must be a table without {fixed} (set 'variant')")
+            if not isinstance(value, dict):
+                raise PosenetError("config 'model' must be a table")
             cfg.model = dict(value)
         elif key == "variant":
             cfg.variant = value
@@ -200,8 +190,6 @@ def _override(section: Any, values: Any, name: str) -> Any:
 
 
 def _validate(cfg: TrainConfig) -> None:
-    if cfg.variant not in VARIANTS:
-        raise PosenetError(f"unknown variant {cfg.variant!r}; choose one of {', '.join(VARIANTS)}")
     cfg.model_config()
     d, o = cfg.data, cfg.optim
     for name in ("dzi_prob", "color_prob", "bg_prob", "bg_from_dataset", "min_visib_fract"):

@@ -1,6 +1,7 @@
 """Evaluation: pose errors, ADD/ADD-S recalls, ESA score and batch-1 latency of a checkpoint on a split.
 
-`evaluate` returns the summary and one record per instance; `by_factor` gives the paper's Table 5:
+`evaluate` runs the split in batches and returns the summary and one record per instance; the latency
+is measured apart, at batch 1, as `posenet bench` measures it. `by_factor` gives the paper's Table 5:
 ADD@0.02 m per (factor, group) over fixed sample lists, one column per variant, checkpoints of the same
 variant averaged.
 """
@@ -8,7 +9,6 @@ variant averaged.
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,15 +17,18 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader
 
+from posenet.bench import dummy_inputs, measure_latency_ms
 from posenet.checkpoint import load_checkpoint
 from posenet.config import config_from_dict
 from posenet.data import open_split
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose
 from posenet.metrics import sample_errors, summarise
-from posenet.models import ModelConfig, PoseNet, build_model
+from posenet.models import PoseNet, create_model
 
-WARMUP_IMAGES = 5  # excluded from the latency mean (allocator, cuDNN autotuning)
+BATCH_SIZE = 32
+LATENCY_WARMUP = 5  # untimed batch-1 forwards (allocator, cuDNN autotuning)
+LATENCY_ITERS = 20  # timed ones; the latency is their median
 
 
 @dataclass
@@ -38,8 +41,7 @@ class EvalResult:
 def load_model(ckpt: Path, device: torch.device) -> tuple[PoseNet, dict[str, Any]]:
     """The network of a checkpoint, in eval mode on `device`, and the checkpoint itself."""
     state = load_checkpoint(ckpt)
-    model_cfg = ModelConfig.from_dict(state["model_config"])
-    model = build_model(state["model_config"]["variant"], model_cfg)
+    model = create_model(**state["model_config"])
     try:
         model.load_state_dict(state["model"])
     except RuntimeError as exc:
@@ -47,9 +49,24 @@ def load_model(ckpt: Path, device: torch.device) -> tuple[PoseNet, dict[str, Any
     return model.to(device).eval(), state
 
 
-def _sync(device: torch.device) -> None:
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
+@torch.inference_mode()
+def predict(
+    model: PoseNet, loader: DataLoader, points: torch.Tensor, device: torch.device
+) -> tuple[list[dict[str, Any]], dict[str, list[float]]]:
+    """Records in loader order (scene_id, im_id, R row-major, t in metres, each error of
+    metrics.sample_errors) and each error's list over them, for metrics.summarise."""
+    records: list[dict[str, Any]] = []
+    errors: dict[str, list[float]] = {}
+    for batch in loader:
+        b = {k: v.to(device) for k, v in batch.items()}
+        R, t = decode_pose(model(b["roi_img"], b["roi_coord2d"]), b)
+        errs = {k: v.tolist() for k, v in sample_errors(R, t, b["R"], b["t"], points).items()}
+        for k, v in errs.items():
+            errors.setdefault(k, []).extend(v)
+        per_instance = [dict(zip(errs, e, strict=True)) for e in zip(*errs.values(), strict=True)]
+        rows = zip(batch["key"].tolist(), R.flatten(1).tolist(), t.tolist(), per_instance, strict=True)
+        records += [{"scene_id": s, "im_id": i, "R": R_i, "t": t_i, **e} for (s, i), R_i, t_i, e in rows]
+    return records, errors
 
 
 def evaluate(
@@ -59,8 +76,13 @@ def evaluate(
     boxes: Path | None = None,
     image_ids: set[int] | None = None,
     workers: int = 2,
+    batch_size: int = BATCH_SIZE,
 ) -> EvalResult:
-    """Run the checkpoint over the split at batch 1 on the current device (GPU if any)."""
+    """Run the checkpoint over the split on the current device (GPU if any), `batch_size` RoIs at a time.
+
+    The batch size changes neither the records nor the summary (beyond float rounding); `latency_ms` is
+    the batch-1 network forward, timed by `posenet.bench.measure_latency_ms` on the same device.
+    """
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     model, state = load_model(ckpt, device)
     cfg = config_from_dict(state["config"])
@@ -68,32 +90,10 @@ def evaluate(
         data, split, cfg.data, model.config, train=False, boxes_file=boxes, image_ids=image_ids
     )
     points = torch.from_numpy(dataset.obj.pm_points).to(device)  # uniform surface points, as the PM loss
-    loader = DataLoader(dataset, batch_size=1, num_workers=workers)
-    errors: dict[str, list[float]] = {}
-    records, times = [], []
-    with torch.inference_mode():
-        for batch in loader:
-            b = {k: v.to(device) for k, v in batch.items()}
-            _sync(device)
-            tic = time.perf_counter()
-            R, t = decode_pose(model(b["roi_img"], b["roi_coord2d"]), b)
-            _sync(device)
-            times.append(time.perf_counter() - tic)
-            errs = {k: float(v[0]) for k, v in sample_errors(R, t, b["R"], b["t"], points).items()}
-            for k, v in errs.items():
-                errors.setdefault(k, []).append(v)
-            scene_id, im_id = (int(v) for v in batch["key"][0])
-            records.append(
-                {
-                    "scene_id": scene_id,
-                    "im_id": im_id,
-                    "R": R[0].flatten().tolist(),
-                    "t": t[0].tolist(),
-                    **errs,
-                }
-            )
-    latency = float(np.mean(times[WARMUP_IMAGES:] if len(times) > WARMUP_IMAGES else times))
-    summary = {**summarise(errors, dataset.obj.diameter), "latency_ms": 1000 * latency, "fps": 1 / latency}
+    loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, num_workers=workers)
+    records, errors = predict(model, loader, points, device)
+    latency = measure_latency_ms(model, dummy_inputs(model.config, device), LATENCY_WARMUP, LATENCY_ITERS)
+    summary = {**summarise(errors, dataset.obj.diameter), "latency_ms": latency, "fps": 1000 / latency}
     return EvalResult(state["model_config"]["variant"], summary, records)
 
 
@@ -117,6 +117,7 @@ def by_factor(
     split: str = "test",
     boxes: Path | None = None,
     workers: int = 2,
+    batch_size: int = BATCH_SIZE,
 ) -> dict[str, Any]:
     """ADD@0.02 m per (factor, group) and variant; sample ids are image ids (scgen: im_id = sample_id).
 
@@ -128,7 +129,7 @@ def by_factor(
     wanted = {i for gs in groups.values() for ids in gs.values() for i in ids}
     per_variant: dict[str, list[dict[int, float]]] = {}
     for ckpt in ckpts:
-        result = evaluate(data, ckpt, split, boxes, image_ids=wanted, workers=workers)
+        result = evaluate(data, ckpt, split, boxes, wanted, workers, batch_size)
         per_variant.setdefault(result.variant, []).append({r["im_id"]: r["add_m"] for r in result.records})
     evaluated = set.intersection(*(set(run) for runs in per_variant.values() for run in runs))
 

@@ -11,6 +11,7 @@ import json
 import math
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,17 +20,18 @@ import torch
 import torch.distributed as dist
 from timm.optim import create_optimizer_v2
 from torch.nn.parallel import DistributedDataParallel
+from torch.optim.lr_scheduler import LambdaLR
 from torch.utils.data import DataLoader
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
 from posenet.config import OptimConfig, TrainConfig
-from posenet.data import EpochSampler, open_split
+from posenet.data import EpochSampler, PoseDataset, open_split
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.losses import LOSS_TERMS, pose_losses
-from posenet.models import build_model
+from posenet.models import PoseNet, create_model
 from scgen.atomic import atomic_write_text
 
 LOG_FILE = "train_log.jsonl"
@@ -73,7 +75,9 @@ def worker_init(_: int) -> None:
     cv2.setNumThreads(1)
 
 
-def make_optimizer(model: torch.nn.Module, o: OptimConfig, total_iters: int):
+def make_optimizer(
+    model: torch.nn.Module, o: OptimConfig, total_iters: int
+) -> tuple[torch.optim.Optimizer, LambdaLR]:
     """Ranger (timm's Lookahead over RAdam) and the per-iteration warmup + flat + cosine schedule."""
     optimizer = create_optimizer_v2(
         model,
@@ -84,7 +88,7 @@ def make_optimizer(model: torch.nn.Module, o: OptimConfig, total_iters: int):
         eps=o.eps,
         decoupled_weight_decay=True,  # Ranger decays weights directly (p -= lr * wd * p)
     )
-    return optimizer, torch.optim.lr_scheduler.LambdaLR(optimizer, lambda it: lr_factor(it, total_iters, o))
+    return optimizer, LambdaLR(optimizer, lambda it: lr_factor(it, total_iters, o))
 
 
 def _init_distributed() -> tuple[int, int, torch.device]:
@@ -166,13 +170,39 @@ def train(
     """Train on `data`'s train split into `out`; returns the path of the last checkpoint."""
     rank, world, device = _init_distributed()
     try:
-        return _train(data, out, cfg, resume, max_steps, rank, world, device)
+        run = _set_up(data, out, cfg, resume, max_steps, rank, world, device)
+        log = _open_run_folder(out, cfg, run.step, run.stop) if rank == 0 else None
+        try:
+            _loop(run, out / LAST if rank == 0 else None, log)
+        finally:
+            if log is not None:
+                log.close()
+        return out / LAST
     finally:
         if world > 1:
             dist.destroy_process_group()
 
 
-def _train(
+@dataclass
+class _Run:
+    """One process's training run: what the loop advances and the checkpoint saves."""
+
+    cfg: TrainConfig
+    model: PoseNet
+    net: torch.nn.Module  # the model, or its DDP wrapper: what the steps call
+    optimizer: torch.optim.Optimizer
+    scheduler: LambdaLR
+    dataset: PoseDataset
+    sampler: EpochSampler
+    loader: DataLoader
+    pm_points: torch.Tensor
+    device: torch.device
+    world: int
+    step: int  # optimisation steps done
+    stop: int  # the step this invocation stops at
+
+
+def _set_up(
     data: Path,
     out: Path,
     cfg: TrainConfig,
@@ -181,91 +211,139 @@ def _train(
     rank: int,
     world: int,
     device: torch.device,
-) -> Path:
+) -> _Run:
+    """Refuse a bad request, then open the data and build the seeded model, optimizer and loader
+    (resumed from OUT/last.pt with `resume`); nothing is written."""
     o = cfg.optim
-    if o.batch_size % world:
-        raise PosenetError(f"batch size {o.batch_size} does not split over {world} processes")
-    if not resume and (out / LAST).exists():
-        raise PosenetError(f"{out} already holds a run ({LAST}); pass --resume or choose another --out")
-    model_cfg = cfg.model_config()
-    dataset = open_split(data, "train", cfg.data, model_cfg, train=True, seed=o.seed)
+    _refuse(out, o.batch_size, resume, world)
+    dataset = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
     total = o.epochs * steps_per_epoch(len(dataset), o, world)
     sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
-    if rank == 0 and max_steps is not None and max_steps > total:
-        tqdm.write(
-            f"note: --max-steps {max_steps} exceeds the schedule's {total} steps "
-            f"({o.epochs} epochs x {sampler.steps_per_epoch}); training stops at step {total}. "
-            "Raise --epochs to train longer."
-        )
-
-    if device.type == "cpu":
-        pin_cpu_threads(o.threads)
-    torch.manual_seed(o.seed)
-    model = build_model(cfg.variant, model_cfg).to(device)
-    optimizer, scheduler = make_optimizer(model, o, total)
-    step = 0
-    if resume:
-        state = load_checkpoint(out / LAST)
-        check_model_config(state, model.config_dict(), out / LAST)
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
-        scheduler.load_state_dict(state["scheduler"])
-        step = int(state["step"])
-    ddp = DistributedDataParallel(model) if world > 1 else model
-    pm_points = pm_loss_points(dataset.obj, device)
-    loader = DataLoader(
-        dataset,
-        batch_size=o.batch_size // world,
+    stop = _stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, announce=rank == 0)
+    model, optimizer, scheduler = _build(cfg, total, device)
+    step = _restore(out / LAST, model, optimizer, scheduler) if resume else 0
+    return _Run(
+        cfg=cfg,
+        model=model,
+        net=DistributedDataParallel(model) if world > 1 else model,
+        optimizer=optimizer,
+        scheduler=scheduler,
+        dataset=dataset,
         sampler=sampler,
-        num_workers=cfg.data.workers,
-        persistent_workers=cfg.data.workers > 0,
+        pm_points=pm_loss_points(dataset.obj, device),
+        loader=_loader(dataset, sampler, cfg.data.workers, device),
+        device=device,
+        world=world,
+        step=step,
+        stop=stop,
+    )
+
+
+def _refuse(out: Path, batch_size: int, resume: bool, world: int) -> None:
+    """A global batch that does not split over the processes, or a new run over an existing one."""
+    if batch_size % world:
+        raise PosenetError(f"batch size {batch_size} does not split over {world} processes")
+    if not resume and (out / LAST).exists():
+        raise PosenetError(f"{out} already holds a run ({LAST}); pass --resume or choose another --out")
+
+
+def _loader(dataset: PoseDataset, sampler: EpochSampler, workers: int, device: torch.device) -> DataLoader:
+    """Batches in the sampler's order; `workers` persistent single-threaded processes."""
+    return DataLoader(
+        dataset,
+        batch_size=sampler.batch_size,
+        sampler=sampler,
+        num_workers=workers,
+        persistent_workers=workers > 0,
         pin_memory=device.type == "cuda",
         worker_init_fn=worker_init,
     )
 
-    def checkpoint() -> dict[str, Any]:
-        return {
-            "model": model.state_dict(),
-            "optimizer": optimizer.state_dict(),
-            "scheduler": scheduler.state_dict(),
-            "step": step,
-            "model_config": model.config_dict(),
-            "config": cfg.to_dict(),
-            "world_size": world,
-            "object": {"extent": dataset.obj.extent.tolist(), "diameter": dataset.obj.diameter},
-        }
 
-    stop = min(total, max_steps) if max_steps is not None else total
-    log = None
-    if rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "config.yaml", cfg.to_yaml())
-        log = _Log(out, step, stop, o.log_every)
-    model.train()
-    try:
-        while step < stop:
-            epoch, skip = divmod(step, sampler.steps_per_epoch)
-            sampler.set_epoch(epoch, skip)
-            tic = time.perf_counter()
-            for batch in loader:
-                values = train_step(ddp, optimizer, _to(batch, device), pm_points, cfg)
-                lr = optimizer.param_groups[0]["lr"]
-                scheduler.step()
-                step += 1
-                if world > 1:
-                    dist.all_reduce(values)
-                    values /= world
-                if log is not None:
-                    toc = time.perf_counter()
-                    losses = dict(zip(("loss", *LOSS_TERMS), values.tolist(), strict=True))
-                    row = {"step": step, "epoch": epoch, "lr": lr, "step_s": toc - tic, **losses}
-                    log.step(row)
-                    tic = toc
-                if step >= stop:
-                    break
-            if rank == 0 and (step >= stop or (epoch + 1) % o.ckpt_every == 0):
-                save_checkpoint(out / LAST, checkpoint())
-    finally:
+def _stop_step(total: int, max_steps: int | None, epochs: int, per_epoch: int, announce: bool) -> int:
+    """The step to stop at: the schedule's end, or --max-steps before it (a cap past it is announced)."""
+    if max_steps is None:
+        return total
+    if announce and max_steps > total:
+        tqdm.write(
+            f"note: --max-steps {max_steps} exceeds the schedule's {total} steps "
+            f"({epochs} epochs x {per_epoch}); training stops at step {total}. "
+            "Raise --epochs to train longer."
+        )
+    return min(total, max_steps)
+
+
+def _build(
+    cfg: TrainConfig, total: int, device: torch.device
+) -> tuple[PoseNet, torch.optim.Optimizer, LambdaLR]:
+    """The network from the run's seed (threads pinned on CPU: reproducible losses), its optimizer and
+    the schedule over `total` steps."""
+    if device.type == "cpu":
+        pin_cpu_threads(cfg.optim.threads)
+    torch.manual_seed(cfg.optim.seed)
+    model = create_model(cfg.variant, cfg.preset, **cfg.model).to(device)
+    optimizer, scheduler = make_optimizer(model, cfg.optim, total)
+    return model, optimizer, scheduler
+
+
+def _restore(path: Path, model: PoseNet, optimizer: torch.optim.Optimizer, scheduler: LambdaLR) -> int:
+    """Load a checkpoint of the same network configuration into the run; returns its step."""
+    state = load_checkpoint(path)
+    check_model_config(state, model.config_dict(), path)
+    model.load_state_dict(state["model"])
+    optimizer.load_state_dict(state["optimizer"])
+    scheduler.load_state_dict(state["scheduler"])
+    return int(state["step"])
+
+
+def _checkpoint(run: _Run) -> dict[str, Any]:
+    """What OUT/last.pt holds: weights, optimizer and schedule state, step, both configs, object size."""
+    return {
+        "model": run.model.state_dict(),
+        "optimizer": run.optimizer.state_dict(),
+        "scheduler": run.scheduler.state_dict(),
+        "step": run.step,
+        "model_config": run.model.config_dict(),
+        "config": run.cfg.to_dict(),
+        "world_size": run.world,
+        "object": {"extent": run.dataset.obj.extent.tolist(), "diameter": run.dataset.obj.diameter},
+    }
+
+
+def _open_run_folder(out: Path, cfg: TrainConfig, step: int, stop: int) -> _Log:
+    """Rank 0: create OUT, write the resolved config.yaml and open the step log from `step`."""
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "config.yaml", cfg.to_yaml())
+    return _Log(out, step, stop, cfg.optim.log_every)
+
+
+def _loop(run: _Run, ckpt: Path | None, log: _Log | None) -> None:
+    """Epochs until the stop step; with `ckpt` (rank 0), save it every ckpt_every epochs and at the stop."""
+    run.model.train()
+    while run.step < run.stop:
+        epoch, skip = divmod(run.step, run.sampler.steps_per_epoch)
+        run.sampler.set_epoch(epoch, skip)
+        _train_epoch(run, epoch, log)
+        if ckpt is not None and (run.step >= run.stop or (epoch + 1) % run.cfg.optim.ckpt_every == 0):
+            save_checkpoint(ckpt, _checkpoint(run))
+
+
+def _train_epoch(run: _Run, epoch: int, log: _Log | None) -> None:
+    """The sampler's batches of `epoch` up to the stop step: one step each, losses averaged over the
+    processes and logged."""
+    tic = time.perf_counter()
+    for batch in run.loader:
+        values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm_points, run.cfg)
+        lr = run.optimizer.param_groups[0]["lr"]
+        run.scheduler.step()
+        run.step += 1
+        if run.world > 1:
+            dist.all_reduce(values)
+            values /= run.world
         if log is not None:
-            log.close()
-    return out / LAST
+            toc = time.perf_counter()
+            losses = dict(zip(("loss", *LOSS_TERMS), values.tolist(), strict=True))
+            log.step({"step": run.step, "epoch": epoch, "lr": lr, "step_s": toc - tic, **losses})
+            tic = toc
+        if run.step >= run.stop:
+            break

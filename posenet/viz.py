@@ -5,17 +5,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import click
 import cv2
 import numpy as np
 import torch
 import trimesh
 
+from posenet.checkpoint import load_checkpoint
 from posenet.config import config_from_dict
 from posenet.data import open_split
 from posenet.data.layout import Instance, scan_split
+from posenet.errors import PosenetError
 from posenet.evaluate import evaluate, load_model
 from posenet.featviz import model_feature_response
+from scgen import bop
 
 GT_COLOUR = (255, 255, 255)  # BGR
 PRED_COLOUR = (60, 220, 60)
@@ -59,12 +61,12 @@ def _label(tile: np.ndarray, text: str) -> np.ndarray:
 
 def overlay_panel(data: Path, split: str, ckpts: list[Path], ids: list[int], workers: int = 0) -> np.ndarray:
     """Rows = samples; columns = input, then each checkpoint's predicted (green) vs GT (white) contour."""
-    instances = {i.im_id: i for i in scan_split(data, split, 1) if i.im_id in ids}
+    obj_id = config_from_dict(load_checkpoint(ckpts[0])["config"]).data.obj_id  # the object it was trained on
+    instances = {i.im_id: i for i in scan_split(data, split, obj_id) if i.im_id in ids}
     missing = sorted(set(ids) - set(instances))
     if missing:
-        raise click.ClickException(f"sample(s) {missing} not in split '{split}' of {data}")
-    mesh = trimesh.load(str(data / "models" / "obj_000001.ply"), process=False)
-    mesh.vertices = mesh.vertices / 1000.0
+        raise PosenetError(f"sample(s) {missing} not in split '{split}' of {data}")
+    mesh = bop.read_model_mesh(data, obj_id)
     preds = []
     for ckpt in ckpts:
         result = evaluate(data, ckpt, split, image_ids=set(ids), workers=workers)
@@ -120,29 +122,3 @@ def heatmap_panel(data: Path, split: str, ckpts: list[Path], ids: list[int]) -> 
             tiles.append(_label(cv2.addWeighted(roi, 0.45, heat, 0.55, 0), variant))
         rows.append(np.hstack(tiles))
     return np.vstack(rows)
-
-
-@click.command()
-@click.option("--data", type=click.Path(path_type=Path), required=True, help="Dataset folder.")
-@click.option(
-    "--ckpt",
-    "ckpts",
-    type=click.Path(path_type=Path, exists=True),
-    multiple=True,
-    required=True,
-    help="Checkpoint; repeat to compare models side by side.",
-)
-@click.option("--samples", required=True, help="Comma-separated sample ids (im_id), e.g. 3,17,42.")
-@click.option("--split", default="test", show_default=True)
-@click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for the PNGs.")
-def viz(data: Path, ckpts: tuple[Path, ...], samples: str, split: str, out: Path) -> None:
-    """Pose overlays (predicted green vs GT white contour) and feature-response heat maps, as PNGs."""
-    try:
-        ids = [int(s) for s in samples.split(",") if s.strip()]
-    except ValueError as exc:
-        raise click.ClickException(f"--samples must be comma-separated integers, got '{samples}'") from exc
-    out.mkdir(parents=True, exist_ok=True)
-    for name, panel in (("poses.png", overlay_panel(data, split, list(ckpts), ids)),
-                        ("features.png", heatmap_panel(data, split, list(ckpts), ids))):  # fmt: skip
-        cv2.imwrite(str(out / name), panel)
-        click.echo(f"wrote {out / name}")

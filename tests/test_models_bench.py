@@ -7,14 +7,14 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
-from posenet.bench import bench
+from posenet.cli import main
 
 
 def test_bench_prints_table_and_writes_json(tmp_path: Path) -> None:
     out = tmp_path / "bench.json"
     args = ["--smoke", "--device", "cpu", "--threads", "1", "--warmup", "0", "--iters", "1"]
     args += ["--variant", "gdrnet", "--variant", "gap-gdrnet", "--json", str(out)]
-    result = CliRunner().invoke(bench, args)
+    result = CliRunner().invoke(main, ["bench", *args])
     assert result.exit_code == 0, result.output
     assert "latency ratio gap-gdrnet / gdrnet" in result.output
     assert "FLOPs/2" in result.output

@@ -10,7 +10,7 @@ import timm
 import torch
 
 from posenet.errors import PosenetError
-from posenet.models import VARIANTS, ModelConfig, build_model
+from posenet.models import VARIANTS, ModelConfig, create_model
 from posenet.models.backbone import Backbone
 
 
@@ -39,7 +39,7 @@ def _one_thread() -> None:
 
 @pytest.mark.parametrize("name", list(VARIANTS))
 def test_paper_config_shapes(name: str) -> None:
-    model = build_model(name).eval()
+    model = create_model(name).eval()
     config = model.config
     assert (config.input_res, config.output_res, config.head_channels) == (256, 64, 256)
     with torch.no_grad():
@@ -49,8 +49,8 @@ def test_paper_config_shapes(name: str) -> None:
 
 @pytest.mark.parametrize("name", list(VARIANTS))
 def test_smoke_config_shapes_and_backward(name: str) -> None:
-    config = ModelConfig.smoke(name)
-    model = build_model(name, config)
+    model = create_model(name, "smoke")
+    config = model.config
     out = model(*inputs(config, batch=2))
     assert {k: tuple(v.shape) for k, v in out.items()} == expected_shapes(config, 2)
     sum(v.square().mean() for v in out.values()).backward()
@@ -63,7 +63,7 @@ def test_smoke_config_shapes_and_backward(name: str) -> None:
 
 @pytest.mark.parametrize("name", list(VARIANTS))
 def test_smoke_preset_keeps_the_variant_modules(name: str) -> None:
-    kinds = {type(m).__name__ for m in build_model(name, ModelConfig.smoke(name)).modules()}
+    kinds = {type(m).__name__ for m in create_model(name, "smoke").modules()}
     variant = VARIANTS[name]
     assert ("GGCA" in kinds) == variant.ggca
     assert ("MECS" in kinds) == variant.mecs
@@ -76,7 +76,7 @@ def backbone_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """ImageNet-style classifier state dicts of the smoke backbones, as a user would have on disk."""
     root = tmp_path_factory.mktemp("weights")
     files = {}
-    for name in {ModelConfig.smoke(v).backbone for v in VARIANTS}:
+    for name in {ModelConfig.create(v, "smoke").backbone for v in VARIANTS}:
         torch.manual_seed(1)
         files[name] = root / f"{name}.pth"
         torch.save(timm.create_model(name, pretrained=False).state_dict(), files[name])
@@ -85,11 +85,11 @@ def backbone_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.mark.parametrize("name", list(VARIANTS))
 def test_local_backbone_weights_load(name: str, backbone_files: dict[str, Path]) -> None:
-    config = ModelConfig.smoke(name)
+    config = ModelConfig.create(name, "smoke")
     path = backbone_files[config.backbone]
     reference = timm.create_model(config.backbone, pretrained=False)
     reference.load_state_dict(torch.load(path))
-    model = build_model(name, ModelConfig.smoke(name, pretrained=str(path))).eval()
+    model = create_model(name, "smoke", pretrained=str(path)).eval()
     x = torch.rand(1, 3, config.input_res, config.input_res)
     with torch.no_grad():
         assert torch.equal(model.backbone(x), reference.eval().forward_features(x))
@@ -100,33 +100,48 @@ def test_local_backbone_weights_load(name: str, backbone_files: dict[str, Path])
 
 def test_wrong_weights_file_is_refused(backbone_files: dict[str, Path], tmp_path: Path) -> None:
     with pytest.raises(PosenetError, match="not a convnext_atto state dict"):
-        build_model("convnext", ModelConfig.smoke("convnext", pretrained=str(backbone_files["resnet18"])))
+        create_model("convnext", "smoke", pretrained=str(backbone_files["resnet18"]))
     with pytest.raises(PosenetError, match="not found"):
-        build_model("gdrnet", ModelConfig.smoke("gdrnet", pretrained=str(tmp_path / "missing.pth")))
+        create_model("gdrnet", "smoke", pretrained=str(tmp_path / "missing.pth"))
 
 
-def test_config_dict_identifies_checkpoints() -> None:
-    d = json.loads(json.dumps(build_model("pgsa", ModelConfig.smoke("pgsa")).config_dict()))
+def test_config_dict_identifies_and_rebuilds_checkpoints() -> None:
+    d = json.loads(json.dumps(create_model("pgsa", "smoke", head_channels=32).config_dict()))
     assert d["variant"] == "pgsa" and "pretrained" not in d  # init-only: not part of the identity
-    assert ModelConfig.from_dict(d) == ModelConfig.smoke("pgsa")
-    assert (
-        ModelConfig.smoke("pgsa", pretrained="imagenet.pth").to_dict() == ModelConfig.smoke("pgsa").to_dict()
-    )
-    assert d != build_model("afr", ModelConfig.smoke("afr")).config_dict()
+    assert create_model(**d).config == ModelConfig.create("pgsa", "smoke", head_channels=32)
+    smoke = ModelConfig.create("pgsa", "smoke")
+    assert ModelConfig.create("pgsa", "smoke", pretrained="imagenet.pth").to_dict() == smoke.to_dict()
+    assert d != create_model("afr", "smoke").config_dict()
 
 
-def test_build_model_refuses_a_config_of_another_variant() -> None:
-    with pytest.raises(PosenetError, match="describes variant 'gap-gdrnet'"):
-        build_model("gdrnet", ModelConfig.smoke("gap-gdrnet"))
-    with pytest.raises(PosenetError, match="unknown variant"):
-        build_model("resnet")
-    with pytest.raises(PosenetError, match="input_res / 4"):
-        ModelConfig(input_res=256, output_res=32)
+@pytest.mark.parametrize(
+    ("args", "overrides", "message"),
+    [
+        (("resnet",), {}, "unknown variant 'resnet'"),
+        (("gdrnet", "large"), {}, "unknown preset 'large'"),
+        (("gdrnet", "smoke"), {"ggca": True}, "describe variant 'custom', not 'gdrnet'"),
+        (("gdrnet", "smoke"), {"backbone": "convnext_atto"}, "describe variant 'convnext', not 'gdrnet'"),
+        (("gdrnet", "smoke"), {"width": 3}, "unknown model field"),
+        (("gdrnet", "smoke"), {"head_channels": "abc"}, "head_channels must be int, got 'abc'"),
+        (("gdrnet", "smoke"), {"fc_dims": [1.5]}, "fc_dims must be tuple"),
+        (("gdrnet", "smoke"), {"input_res": 256}, "input_res / 4"),
+    ],
+)
+def test_create_model_refuses_another_variant_and_bad_fields(
+    args: tuple[str, ...], overrides: dict, message: str
+) -> None:
+    with pytest.raises(PosenetError, match=message):
+        ModelConfig.create(*args, **overrides)
+
+
+def test_overrides_within_the_variant_are_kept() -> None:
+    config = ModelConfig.create("gap-gdrnet", "smoke", ggca=True, backbone="convnext_femto", fc_dims=[64, 32])
+    assert (config.backbone, config.fc_dims, config.variant) == ("convnext_femto", (64, 32), "gap-gdrnet")
 
 
 def test_pnp_input_is_xyz_visible_mask_regions_and_roi_coordinates() -> None:
-    config = ModelConfig.smoke("gdrnet")
-    model = build_model("gdrnet", config).eval()
+    model = create_model("gdrnet", "smoke").eval()
+    config = model.config
     assert model.pnp.encoder[0][0].in_channels == 3 + 1 + config.num_regions + 2
     seen, shift = {}, {"mask": 0.0}
 

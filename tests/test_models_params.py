@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from posenet.bench import PAPER
-from posenet.models import VARIANTS, build_model
+from posenet.models import VARIANTS, create_model
 from posenet.models.afr import AFR, GGCA, MECS
 from posenet.models.pnp import PGSA
 
@@ -22,7 +22,7 @@ def n_params(module: torch.nn.Module) -> int:
 @pytest.fixture(scope="module")
 def counts() -> dict[str, int]:
     with torch.device("meta"):
-        return {name: n_params(build_model(name)) for name in VARIANTS}
+        return {name: n_params(create_model(name)) for name in VARIANTS}
 
 
 def test_gdrnet_matches_paper(counts: dict[str, int]) -> None:

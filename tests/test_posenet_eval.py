@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from posenet_helpers import posenet_dataset
 
 from posenet.cli import main
-from posenet.evaluate import format_table
+from posenet.evaluate import evaluate, format_table
 from scgen.cli import main as scgen_main
 
 TINY = """\
@@ -19,6 +19,18 @@ model: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, fc_d
 data: {workers: 0}
 optim: {batch_size: 4, epochs: 1}
 """
+
+# Float32 forwards round differently per batch size: absolute tolerances in each key's unit (the rotation
+# error's is loose because arccos is steep near 0 and 180 deg); recalls and counts must be equal
+BATCH_TOLERANCE = {
+    "R": 1e-4,
+    "t": 1e-5,
+    "re_deg": 1e-2,
+    "te_m": 1e-5,
+    "add_m": 1e-5,
+    "adds_m": 1e-5,
+    "esa": 1e-3,
+}
 
 
 @pytest.fixture(scope="module")
@@ -76,6 +88,21 @@ def test_eval_writes_summary_and_predictions(dataset_dir: Path, checkpoint: Path
     assert len(rows) == summary["n"] == len(json.loads(boxes.read_text()))
     assert {"scene_id", "im_id", "R", "t", "re_deg", "te_m", "add_m", "adds_m", "esa"} <= set(rows[0])
     assert len(rows[0]["R"]) == 9 and len(rows[0]["t"]) == 3
+
+
+def test_batched_evaluation_gives_the_batch_1_records(dataset_dir: Path, checkpoint: Path) -> None:
+    one = evaluate(dataset_dir, checkpoint, workers=0, batch_size=1)
+    batched = evaluate(dataset_dir, checkpoint, workers=0, batch_size=3)
+    assert len(one.records) > 3 and len(one.records) % 3  # several batches, the last one partial
+    assert [list(r) for r in batched.records] == [list(r) for r in one.records]  # same keys, same order
+    for a, b in zip(one.records, batched.records, strict=True):
+        assert (a["scene_id"], a["im_id"]) == (b["scene_id"], b["im_id"])
+        for key, tol in BATCH_TOLERANCE.items():
+            assert b[key] == pytest.approx(a[key], abs=tol), key
+    s1, sb = one.summary, batched.summary
+    assert sb.keys() == s1.keys() and sb["fps"] == 1000 / sb["latency_ms"]
+    for key in s1.keys() - {"latency_ms", "fps"}:
+        assert sb[key] == pytest.approx(s1[key], abs=BATCH_TOLERANCE.get(key, 0.0)), key
 
 
 def test_by_factor_table_averages_checkpoints_of_one_variant(

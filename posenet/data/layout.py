@@ -5,13 +5,13 @@ Only metadata is read here (JSON files); pixels are read lazily by the Dataset.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from posenet.errors import PosenetError
+from scgen import bop
 
 
 @dataclass(frozen=True)
@@ -43,29 +43,30 @@ class Instance:
         return self.scene_id, self.im_id
 
 
-def _read_json(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise PosenetError(f"cannot read {path}: {exc}") from exc
-
-
 def image_size(root: Path) -> tuple[int, int]:
     """(width, height) from camera.json; also the check that `root` is a dataset at all."""
-    cam_path = root / "camera.json"
+    cam_path = root / bop.CAMERA_FILE
     if not root.is_dir() or not cam_path.is_file():
-        raise PosenetError(f"{root} is not a dataset folder (no camera.json)")
-    cam = _read_json(cam_path)
+        raise PosenetError(f"{root} is not a dataset folder (no {bop.CAMERA_FILE})")
+    cam = bop.read_json(cam_path)
     return int(cam["width"]), int(cam["height"])
+
+
+def _has_gt(scene: Path) -> bool:
+    return bop.scene_file(scene, "scene_gt").is_file()
 
 
 def scan_split(root: Path, split: str, obj_id: int) -> list[Instance]:
     """Every instance of object `obj_id` in `root/split/*/`, sorted by (scene_id, im_id, inst)."""
     size = image_size(root)
     split_dir = root / split
-    scenes = sorted(p for p in split_dir.glob("[0-9]*") if (p / "scene_gt.json").is_file())
+    scenes = sorted(p for p in split_dir.glob("[0-9]*") if _has_gt(p))
     if not scenes:
-        found = sorted(p.name for p in root.iterdir() if p.is_dir() and any(p.glob("*/scene_gt.json")))
+        found = sorted(
+            p.name
+            for p in root.iterdir()
+            if p.is_dir() and any(p.glob("*/" + bop.scene_file(p, "scene_gt").name))
+        )
         raise PosenetError(f"{root} has no split '{split}' (splits found: {', '.join(found) or 'none'})")
     out: list[Instance] = []
     for scene in scenes:
@@ -74,20 +75,17 @@ def scan_split(root: Path, split: str, obj_id: int) -> list[Instance]:
 
 
 def _scan_scene(scene: Path, split: str, obj_id: int, size: tuple[int, int]) -> list[Instance]:
-    gt, cams, infos = (
-        _read_json(scene / f) for f in ("scene_gt.json", "scene_camera.json", "scene_gt_info.json")
-    )
+    gt, cams, infos = (bop.read_json(bop.scene_file(scene, name)) for name in bop.SCENE_FILES)
     out: list[Instance] = []
     try:
         for im_key in sorted(gt, key=int):
             im_id = int(im_key)
             rgb = next(
-                (p for p in (scene / "rgb" / f"{im_id:06d}{e}" for e in (".png", ".jpg")) if p.is_file()),
-                None,
+                (p for p in (bop.rgb_path(scene, im_id, e) for e in ("png", "jpg")) if p.is_file()), None
             )
             if rgb is None:
                 continue  # a sample still being written: nothing to train or test on yet
-            K = np.asarray(cams[im_key]["cam_K"], dtype=np.float64).reshape(3, 3)
+            K = bop.camera_K(cams[im_key])
             for inst, (ann, info) in enumerate(zip(gt[im_key], infos[im_key], strict=True)):
                 if int(ann["obj_id"]) == obj_id:
                     out.append(_instance(scene, split, im_id, inst, rgb, K, ann, info, size))
@@ -107,7 +105,7 @@ def _instance(
     info: dict,
     size: tuple,
 ) -> Instance:
-    name = f"{im_id:06d}_{inst:06d}"
+    R, t = bop.gt_pose(ann)
     return Instance(
         split=split,
         obj_id=int(ann["obj_id"]),
@@ -115,12 +113,12 @@ def _instance(
         im_id=im_id,
         inst=inst,
         rgb=rgb,
-        mask=scene / "mask" / f"{name}.png",
-        mask_visib=scene / "mask_visib" / f"{name}.png",
-        xyz=scene / "xyz" / f"{name}.exr",
+        mask=bop.mask_path(scene, im_id, inst),
+        mask_visib=bop.mask_path(scene, im_id, inst, visib=True),
+        xyz=bop.xyz_path(scene, im_id, inst),
         K=K,
-        R=np.asarray(ann["cam_R_m2c"], dtype=np.float64).reshape(3, 3),
-        t=np.asarray(ann["cam_t_m2c"], dtype=np.float64) / 1000.0,
+        R=R,
+        t=t,
         bbox_obj=tuple(int(v) for v in info["bbox_obj"]),
         bbox_visib=tuple(int(v) for v in info["bbox_visib"]),
         xyz_box=tuple(int(v) for v in info.get("xyz_box", info["bbox_visib"])),

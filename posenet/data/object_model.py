@@ -7,7 +7,6 @@ every process and every run of one dataset agrees.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,6 +14,7 @@ import numpy as np
 import trimesh
 
 from posenet.errors import PosenetError
+from scgen import bop
 
 SURFACE_POINTS_SEED = 0  # fixed: the PM loss and ADD / ADD-S see the same points in every run
 
@@ -53,26 +53,25 @@ def surface_points(mesh: trimesh.Trimesh, n: int, seed: int = SURFACE_POINTS_SEE
 
 def load_object_model(root: Path, obj_id: int, num_regions: int, num_pm: int) -> ObjectModel:
     """Object `obj_id` of the dataset at `root`: models/models_info.json and models/obj_{id:06d}.ply."""
-    info_path = root / "models" / "models_info.json"
-    ply_path = root / "models" / f"obj_{obj_id:06d}.ply"
-    if not info_path.is_file():
-        raise PosenetError(f"{root} is not a dataset: {info_path.relative_to(root)} is missing")
+    models = root / bop.MODELS_DIR
+    info_path, ply_path = models / bop.MODELS_INFO_FILE, models / bop.model_file(obj_id)
+    for path in (info_path, ply_path):
+        if not path.is_file():
+            raise PosenetError(f"{root} is not a dataset: {path.relative_to(root)} is missing")
     try:
-        info = json.loads(info_path.read_text())[str(obj_id)]
-    except (json.JSONDecodeError, KeyError) as exc:
+        info = bop.read_models_info(root)[str(obj_id)]
+        extent = bop.model_size_m(info)
+    except (KeyError, TypeError) as exc:
         raise PosenetError(f"{info_path}: no valid entry for object {obj_id}") from exc
-    if not ply_path.is_file():
-        raise PosenetError(f"{root} is not a dataset: {ply_path.relative_to(root)} is missing")
-    mesh = trimesh.load(str(ply_path), force="mesh", process=False)
-    vertices = np.asarray(mesh.vertices, dtype=np.float64) / 1000.0
+    mesh = bop.read_model_mesh(root, obj_id)
+    vertices = np.asarray(mesh.vertices)
     if len(vertices) == 0 or len(mesh.faces) == 0 or mesh.area <= 0:
         raise PosenetError(f"{ply_path} has no surface (vertices and faces of non-zero area)")
-    extent = np.array([info["size_x"], info["size_y"], info["size_z"]], dtype=np.float64) / 1000.0
     return ObjectModel(
         obj_id=obj_id,
         vertices=vertices,
         extent=extent,
-        diameter=float(info["diameter"]) / 1000.0,
+        diameter=float(info["diameter"]) / bop.MM_PER_M,
         fps_points=farthest_point_sampling(vertices, num_regions),
-        pm_points=surface_points(mesh, num_pm) / 1000.0,
+        pm_points=surface_points(mesh, num_pm),
     )

@@ -1,6 +1,6 @@
-"""GDR-Net / GAP-GDRNet pose networks: `build_model(name, ModelConfig(...))` for every paper variant."""
+"""GDR-Net / GAP-GDRNet pose networks: `create_model(variant, preset, **overrides)` builds every one."""
 
-from .config import VARIANTS, ModelConfig, Variant
-from .posenet import PoseNet, build_model
+from .config import PRESETS, VARIANTS, ModelConfig, Variant
+from .posenet import PoseNet, create_model
 
-__all__ = ["VARIANTS", "ModelConfig", "PoseNet", "Variant", "build_model"]
+__all__ = ["PRESETS", "VARIANTS", "ModelConfig", "PoseNet", "Variant", "create_model"]

@@ -1,8 +1,10 @@
-"""Model configuration: one dataclass, the seven paper variants as named presets of it."""
+"""Model configuration: one dataclass, filled from a paper variant, a size preset and overrides."""
 
 from __future__ import annotations
 
 import dataclasses
+import types
+import typing
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -28,8 +30,12 @@ VARIANTS: dict[str, Variant] = {
     "gap-gdrnet": Variant("convnext_tiny", ggca=True, mecs=True, pgsa=True),
 }
 
-# Small timm backbones of the same family for the CPU smoke preset.
+PRESETS = ("paper", "smoke")
+# The CPU smoke preset: small timm backbones of the same family, every module of the variant kept narrower.
 SMOKE_BACKBONES = {"resnet34": "resnet18", "convnext_tiny": "convnext_atto"}
+SMOKE_SIZES: dict[str, Any] = dict(
+    input_res=128, output_res=32, head_channels=64, pnp_channels=64, fc_dims=(256, 128)
+)
 
 
 def backbone_family(backbone: str) -> str:
@@ -41,10 +47,10 @@ def backbone_family(backbone: str) -> str:
 class ModelConfig:
     """Architecture of a GDR-Net / GAP-GDRNet model; defaults are the paper's full GAP-GDRNet.
 
-    The backbone is a timm name with a stride-32 last feature map; the geometric head upsamples it ×8,
-    so `output_res` must be `input_res / 4`. `pretrained` is a local backbone state dict (timm or
-    torchvision ImageNet checkpoint of the same architecture); it only affects initialisation and is
-    therefore not part of `to_dict()`.
+    Make one with `ModelConfig.create(variant, preset, **overrides)`. The backbone is a timm name with a
+    stride-32 last feature map; the geometric head upsamples it ×8, so `output_res` must be
+    `input_res / 4`. `pretrained` is a local backbone state dict (timm or torchvision ImageNet checkpoint
+    of the same architecture); it only affects initialisation and is therefore not part of `to_dict()`.
     """
 
     backbone: str = "convnext_tiny"
@@ -65,7 +71,16 @@ class ModelConfig:
 
     def __post_init__(self) -> None:
         for name in ("fc_dims", "mecs_kernels"):  # YAML / JSON give lists
-            object.__setattr__(self, name, tuple(getattr(self, name)))
+            if isinstance(getattr(self, name), list):
+                object.__setattr__(self, name, tuple(getattr(self, name)))
+        hints = typing.get_type_hints(type(self))
+        wrong = [
+            f"{f.name} must be {_type_name(hints[f.name])}, got {getattr(self, f.name)!r}"
+            for f in dataclasses.fields(self)
+            if not _has_type(getattr(self, f.name), hints[f.name])
+        ]
+        if wrong:  # the rules below assume the types
+            raise PosenetError("invalid ModelConfig: " + "; ".join(wrong))
         rules = (
             (self.input_res == 4 * self.output_res, "output_res must be input_res / 4 (stride 32, x8 head)"),
             (self.output_res % 8 == 0, "output_res must be a multiple of 8 (three stride-2 PnP blocks)"),
@@ -82,26 +97,23 @@ class ModelConfig:
             raise PosenetError("invalid ModelConfig: " + "; ".join(failed))
 
     @classmethod
-    def paper(cls, variant: str = "gap-gdrnet", **overrides: Any) -> ModelConfig:
-        """The paper's configuration of `variant` (256² input, 256-ch head, 128-ch Patch-PnP)."""
-        return cls(**{**_variant(variant)._asdict(), **overrides})
+    def create(cls, variant: str, preset: str = "paper", **overrides: Any) -> ModelConfig:
+        """The `preset` configuration of paper variant `variant`, with any fields overridden.
 
-    @classmethod
-    def smoke(cls, variant: str = "gap-gdrnet", **overrides: Any) -> ModelConfig:
-        """Reduced-width CPU preset of `variant`: small backbone, 64-ch head, 128² input, 32² output.
-
-        Every module of the variant (AFR branches, PGSA) is kept, only narrower.
+        The overrides must keep the variant (its ggca, mecs, pgsa and backbone family), so a config
+        file cannot build another ablation row under this one's name; a checkpoint's `config_dict()`
+        (every field) rebuilds its own configuration.
         """
-        v = _variant(variant)
-        small = dict(
-            backbone=SMOKE_BACKBONES[v.backbone],
-            input_res=128,
-            output_res=32,
-            head_channels=64,
-            pnp_channels=64,
-            fc_dims=(256, 128),
-        )
-        return cls(**{**v._asdict(), **small, **overrides})
+        unknown = sorted(set(overrides) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:
+            raise PosenetError(f"unknown model field(s): {', '.join(unknown)}")
+        config = cls(**{**_preset_fields(variant, preset), **overrides})
+        if config.variant != variant:
+            raise PosenetError(
+                f"model fields describe variant {config.variant!r}, not {variant!r} "
+                "(the variant sets ggca, mecs, pgsa and the backbone family)"
+            )
+        return config
 
     @property
     def variant(self) -> str:
@@ -123,14 +135,30 @@ class ModelConfig:
         del d["pretrained"]
         return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> ModelConfig:
-        """Inverse of `to_dict` (extra keys such as 'variant' are ignored)."""
-        fields = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in fields})
+
+def _preset_fields(variant: str, preset: str) -> dict[str, Any]:
+    """The fields `preset` sets for paper variant `variant` (the rest keep the paper's defaults)."""
+    if variant not in VARIANTS:
+        raise PosenetError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
+    if preset not in PRESETS:
+        raise PosenetError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+    fields = VARIANTS[variant]._asdict()
+    if preset == "smoke":
+        return {**fields, "backbone": SMOKE_BACKBONES[fields["backbone"]], **SMOKE_SIZES}
+    return fields
 
 
-def _variant(name: str) -> Variant:
-    if name not in VARIANTS:
-        raise PosenetError(f"unknown variant {name!r}; choose one of {', '.join(VARIANTS)}")
-    return VARIANTS[name]
+def _has_type(value: Any, hint: Any) -> bool:
+    """isinstance for the field annotations used here (int, bool, str, tuple[int, ...], str | None);
+    exact, so a bool is no int (YAML `true` for a width is an error)."""
+    args = typing.get_args(hint)
+    if typing.get_origin(hint) is tuple:
+        return isinstance(value, tuple) and all(_has_type(v, args[0]) for v in value)
+    if typing.get_origin(hint) is types.UnionType:
+        return any(_has_type(value, a) for a in args)
+    return type(value) is hint
+
+
+def _type_name(hint: Any) -> str:
+    """'int' for int, 'tuple[int, ...]' for the generic aliases: what an error message shows."""
+    return hint.__name__ if isinstance(hint, type) else str(hint)

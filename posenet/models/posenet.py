@@ -7,11 +7,9 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from posenet.errors import PosenetError
-
 from .afr import AFR
 from .backbone import Backbone
-from .config import VARIANTS, ModelConfig
+from .config import ModelConfig
 from .geo_head import GeoHead
 from .pnp import PatchPnP
 
@@ -75,22 +73,15 @@ class PoseNet(nn.Module):
         }
 
     def config_dict(self) -> dict[str, Any]:
-        """JSON-able identity of the architecture, stored with checkpoints to refuse mismatched ones."""
+        """JSON-able identity of the architecture, stored in checkpoints; `create_model(**d)` rebuilds it."""
         return {"variant": self.config.variant, **self.config.to_dict()}
 
 
-def build_model(name: str, config: ModelConfig | None = None) -> PoseNet:
-    """Build variant `name`; without `config`, the paper's configuration of it.
+def create_model(variant: str, preset: str = "paper", **overrides: Any) -> PoseNet:
+    """Paper variant `variant` in the `preset` configuration (paper or smoke), any field overridden.
 
-    A given `config` must describe the same variant (same modules, same backbone family), e.g.
-    `ModelConfig.paper(name, ...)` or `ModelConfig.smoke(name)`.
+    The one way to build a network, as timm's `create_model`: training, evaluation, bench and tests use
+    it, and `create_model(**checkpoint["model_config"])` rebuilds a saved one. `ModelConfig.create`
+    validates the arguments.
     """
-    if name not in VARIANTS:
-        raise PosenetError(f"unknown variant {name!r}; choose one of {', '.join(VARIANTS)}")
-    config = ModelConfig.paper(name) if config is None else config
-    if config.variant != name:
-        raise PosenetError(
-            f"config describes variant {config.variant!r}, not {name!r}; "
-            f"use ModelConfig.paper({name!r}, ...) or ModelConfig.smoke({name!r}, ...)"
-        )
-    return PoseNet(config)
+    return PoseNet(ModelConfig.create(variant, preset, **overrides))
