@@ -69,10 +69,8 @@ class Generator:
         if self._backend is None:
             from scgen.render.base import create_backend
 
-            settings = self.render_settings
-            self._backend = create_backend(
-                settings["backend"], self.model, **{k: v for k, v in settings.items() if k != "backend"}
-            )
+            r = self.render_settings
+            self._backend = create_backend(r["backend"], self.model, r["quality"], r["device"], r["threads"])
         buffers = self._backend.render(spec)
         return Sample(spec, buffers, annotate(spec, buffers))
 
@@ -101,9 +99,7 @@ class Generator:
 
 def _rebuild(model: TargetModel | tuple[Path | None, bool], cfg: dict[str, Any], seed: int,
              render_settings: dict[str, Any]) -> Generator:  # fmt: skip
-    if isinstance(model, tuple):
-        path, keep_scale = model
-        generator = Generator(load_target(path, keep_scale=keep_scale), cfg, seed, **render_settings)
-        generator.model_source = model
-        return generator
-    return Generator(model, cfg, seed, **render_settings)
+    source = model if isinstance(model, tuple) else None
+    generator = Generator(load_target(*source) if source else model, cfg, seed, **render_settings)
+    generator.model_source = source
+    return generator
