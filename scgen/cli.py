@@ -245,13 +245,9 @@ def preview(out, n, backend, seed, model_path, keep_scale, config_path, resoluti
     """Render n samples in memory, as render would, and write OUT/preview.png: RGB, masks, xyz, factors."""
     from scgen.generator import Generator
     from scgen.preview import build_preview, save_png
-    from scgen.render.base import check_backend
-    from scgen.render.conventions import check_quality
 
     if n <= 0:
         raise ScgenError(f"--n must be a positive number of samples, got {n}")
-    check_quality(quality)
-    check_backend(backend)
     generator = Generator.load(
         model_path,
         config_path,

@@ -49,7 +49,7 @@ def create_backend(
 
     `threads` caps the renderer's CPU threads (several workers share the cores); None = all cores.
     """
-    check_backend(name, device)
+    check_backend(name)  # the device is the backend's to choose (Blender probes the GPUs once)
     if name == "mitsuba":
         from scgen.render.mitsuba_backend import MitsubaBackend
 

@@ -138,7 +138,7 @@ def _sample_background(
             u, v = rng.uniform(0, camera.width - 1), rng.uniform(0, camera.height - 1)
             half = rng.uniform(*cfg["clutter_size_rel"]) * radius_px * depth / camera.focal
             depth = max(depth, t[2] + radius + blank.bound * half)  # wholly behind the target
-            clutter.append(blank.spec(half, camera.backproject(u, v, depth)))
+            clutter.append(blank.spec(half, backproject(camera.K_mat, u, v, depth)))
     return BackgroundSpec(kind, bg_seed, params), clutter
 
 

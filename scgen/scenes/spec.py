@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from scgen.scenes.geometry import backproject, focal_length, project
+from scgen.scenes.geometry import focal_length
 
 
 @dataclass(frozen=True)
@@ -80,14 +80,6 @@ class CameraSpec:
         """Unit camera-frame directions through every pixel centre, H x W x 3, float64."""
         rays = self.pixel_rays()
         return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
-
-    def project(self, X: np.ndarray) -> np.ndarray:
-        """Pixel coordinates (N x 2) of camera-frame points X (N x 3)."""
-        return project(self.K_mat, X)
-
-    def backproject(self, u: float, v: float, z: float) -> np.ndarray:
-        """The camera-frame point at depth z seen at pixel (u, v)."""
-        return backproject(self.K_mat, u, v, z)
 
 
 @dataclass(frozen=True)
