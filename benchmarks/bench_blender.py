@@ -26,6 +26,7 @@ from scgen.generator import Generator
 from scgen.model import TargetModel, load_target
 from scgen.render.blender import BlenderBackend
 from scgen.render.blender_settings import PRESETS, QualityPreset, configure_beauty
+from scgen.runner import write_static_files
 from scgen.scenes import load_config
 from scgen.scenes.spec import SceneSpec
 from scgen.writer import WriteOptions, write_sample
@@ -38,12 +39,13 @@ def rss_mb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def persistent_run(model: TargetModel, specs: list[SceneSpec], quality: str) -> dict:
+def persistent_run(generator: Generator, specs: list[SceneSpec], quality: str) -> dict:
     """Render, annotate and write every spec with one backend; per-frame times and RSS."""
-    backend = BlenderBackend(model, quality=quality)
+    backend = BlenderBackend(generator.model, quality=quality)
     render_s, sample_s, rss = [], [], {}
     with tempfile.TemporaryDirectory(prefix="bench-blender-") as out:
         layout = Layout(out)
+        write_static_files(layout, generator)
         t_start = time.perf_counter()
         for k, spec in enumerate(specs, start=1):
             t0 = time.perf_counter()
@@ -134,7 +136,7 @@ def main() -> None:
     print(f"{model.name}: {len(model.mesh.faces)} triangles, {width}x{height}, {PRESETS[args.quality]}")
 
     if args.frames:
-        r = persistent_run(model, specs[: args.frames], args.quality)
+        r = persistent_run(generator, specs[: args.frames], args.quality)
         report_persistent(r, args.frames)
         if args.naive_frames:
             naive = statistics.mean(naive_run(model, specs[: args.naive_frames], args.quality))

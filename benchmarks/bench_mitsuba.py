@@ -18,6 +18,7 @@ from scgen.factors import spec_key
 from scgen.generator import Generator
 from scgen.model import load_target
 from scgen.render.base import create_backend
+from scgen.runner import write_static_files
 from scgen.scenes import load_config
 from scgen.splits import plan_splits
 from scgen.validate import reprojection_error
@@ -37,6 +38,7 @@ def main() -> None:
     specs = [generator.scene(i) for i in range(args.n)]
     splits = plan_splits([spec_key(s) for s in specs], (0.7, 0.1, 0.2), 0)
     layout = Layout(out)
+    write_static_files(layout, generator)
     surface = trimesh.proximity.ProximityQuery(model.mesh)
     backend.render(specs[0])  # warm-up (JIT compilation)
     t_render = t_other = 0.0
@@ -63,14 +65,16 @@ def main() -> None:
     print(f"  images/s: {args.n / total:.2f}   render {t_render / args.n:.3f} s/img")
     print(f"  time outside the renderer (annotation + writing): {100 * t_other / total:.1f} %")
     sizes: dict[str, int] = defaultdict(int)
+    static = 0  # written once per dataset: models, models_eval, camera, config, test targets
     for p in out.rglob("*"):
-        if p.is_file():
-            kind = (
-                p.parent.name
-                if p.parent.name in ("rgb", "mask", "mask_visib", "xyz", "records")
-                else "json/meta"
-            )
-            sizes[kind] += p.stat().st_size
+        if not p.is_file():
+            continue
+        if p.parent == out or p.relative_to(out).parts[0] in ("models", "models_eval"):
+            static += p.stat().st_size
+            continue
+        kinds = ("rgb", "depth", "mask", "mask_visib", "xyz", "records")
+        sizes[p.parent.name if p.parent.name in kinds else "json/meta"] += p.stat().st_size
+    print(f"  files written once per dataset: {static / 2**20:.1f} MB")
     print("  bytes per sample by file kind:")
     for kind, b in sorted(sizes.items()):
         print(f"    {kind:<11s} {b / args.n / 1024:8.1f} KB")

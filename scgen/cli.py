@@ -93,7 +93,15 @@ def main() -> None:
 @click.option("--ray-address", default=None, help="Ray cluster address (default: start a local Ray).")
 @click.option("--rgb-format", type=click.Choice(["png", "jpg"]), default="png", show_default=True)
 @click.option("--xyz-dtype", type=click.Choice(["float16", "float32"]), default="float16", show_default=True)
-@click.option("--save-depth", is_flag=True, help="Also write BOP uint16 depth maps.")
+@click.option(
+    "--depth/--no-depth",
+    "--save-depth",
+    "save_depth",
+    default=True,
+    show_default=True,
+    help="Write BOP uint16 depth maps (bop_toolkit's calc_gt_info and VSD read them). "
+    "--save-depth, the old opt-in, is kept as an alias of --depth.",
+)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @one_line_errors(ScgenError)
 def render(
@@ -140,6 +148,28 @@ def render(
         f"{out}: rendered {summary['rendered']} (skipped {summary['skipped']} already complete), "
         f"{summary['complete']}/{n} on disk, {rate:.2f} img/s; "
         + ", ".join(f"{k} {v}" for k, v in summary["splits"].items())
+    )
+
+
+@main.command()
+@click.argument("bop_dir", type=click.Path(path_type=Path))
+@click.option("--split", default=None, help="Only this split folder (e.g. test); default: every split.")
+@click.option("--workers", type=int, default=None, help="Worker processes (default: CPU cores).")
+@click.option("--overwrite", is_flag=True, help="Replace the dataset's own masks and scene_gt_info.json.")
+@click.option("--xyz-dtype", type=click.Choice(["float16", "float32"]), default="float16", show_default=True)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@one_line_errors(ScgenError)
+def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: bool, xyz_dtype: str,
+             quiet: bool) -> None:  # fmt: skip
+    """Label any BOP dataset: xyz maps of every scene_gt instance, masks and scene_gt_info where missing."""
+    from scgen.bop_annotate import AnnotateJob, AnnotateOptions, run_annotate
+
+    job = AnnotateJob(bop_dir, split, workers or os.cpu_count() or 1, AnnotateOptions(xyz_dtype, overwrite))
+    s = run_annotate(job, progress=not quiet)
+    rate = s["instances"] / s["total_s"] if s["total_s"] > 0 else 0.0
+    click.echo(
+        f"{bop_dir}: annotated {s['annotated']} images ({s['instances']} instances, {rate:.1f} instances/s), "
+        f"skipped {s['skipped']} already complete; scene_gt_info.json of {s['scenes']} scene(s) written"
     )
 
 

@@ -13,7 +13,8 @@ from scgen.bop import read_json
 from scgen.errors import ScgenError
 
 MANIFEST = "scgen.json"
-FORMAT = "scgen-bop/1"
+# 2: depth by default, scene_gt_info in bop_toolkit's conventions, models_eval/, test targets
+FORMAT = "scgen-bop/2"
 CHUNK = 1000  # samples per BOP scene folder: scene_id = sample_id // CHUNK; im_id = sample_id
 OBJ_ID = 1  # the target's BOP object id
 TARGET_INSTANCE = 0  # the target is the only annotated instance of each image
@@ -48,6 +49,14 @@ class Layout:
     def models_dir(self) -> Path:
         return self.root / bop.MODELS_DIR
 
+    @property
+    def models_eval_dir(self) -> Path:
+        return self.root / bop.MODELS_EVAL_DIR
+
+    def test_targets(self, kind: str) -> Path:
+        """test_targets_{kind}.json, kind bop19 or bop24 (bop.TEST_TARGETS_FILES)."""
+        return self.root / bop.TEST_TARGETS_FILES[kind]
+
     def record(self, split: str, sample_id: int) -> Path:
         return self.chunk_dir(split, sample_id) / "records" / f"{sample_id:06d}.json"
 
@@ -81,7 +90,10 @@ def open_dataset(root: str | Path) -> tuple[Layout, dict[str, Any]]:
         raise ScgenError(f"not a dataset folder: {root} has no {MANIFEST} (make one with `scgen render`)")
     manifest = read_json(layout.manifest_path)
     if manifest.get("format") != FORMAT:
-        raise ScgenError(f"unsupported dataset format {manifest.get('format')!r} in {layout.manifest_path}")
+        raise ScgenError(
+            f"unsupported dataset format {manifest.get('format')!r} in {layout.manifest_path} "
+            f"(this scgen reads and writes {FORMAT!r}; render the dataset again)"
+        )
     return layout, manifest
 
 

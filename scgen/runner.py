@@ -23,13 +23,13 @@ from scgen.errors import ScgenError
 from scgen.executors import run_local, run_ray
 from scgen.factors import spec_key
 from scgen.generator import Generator
-from scgen.model import write_model_dir
+from scgen.model import write_eval_model_dir, write_model_dir
 from scgen.render.base import check_backend
 from scgen.render.conventions import check_quality
 from scgen.scenes.spec import SceneSpec
 from scgen.splits import SPLITS, plan_splits, split_lists
 from scgen.worker import Done, Task, WorkerSettings
-from scgen.writer import WriteOptions, existing_sample_ids, finalize
+from scgen.writer import WriteOptions, dataset_depth_scale, existing_sample_ids, finalize
 
 
 @dataclass
@@ -143,6 +143,20 @@ def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def write_static_files(layout: Layout, generator: Generator) -> None:
+    """The files every sample's writer reads: camera.json (with the dataset's depth scale), config.json,
+    the BOP models and the evaluation models."""
+    layout.root.mkdir(parents=True, exist_ok=True)
+    cam = generator.cfg["camera"]
+    depth_scale = dataset_depth_scale(generator.cfg, generator.model)
+    camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
+              "height": cam["height"], "depth_scale": depth_scale}  # fmt: skip
+    atomic_write_text(layout.camera_path, dumps(camera))
+    atomic_write_text(layout.root / "config.json", dumps(generator.cfg))
+    write_model_dir(generator.model, layout.models_dir, OBJ_ID)
+    write_eval_model_dir(generator.model, layout.models_eval_dir, OBJ_ID)
+
+
 def prepare_output(job: RenderJob, plan: Plan) -> Layout:
     """Create the dataset folder and its static files, or check that an existing one matches."""
     layout = Layout(job.out)
@@ -157,13 +171,7 @@ def prepare_output(job: RenderJob, plan: Plan) -> Layout:
             )
         remove_stale_temporaries(layout.root)
         return layout
-    layout.root.mkdir(parents=True, exist_ok=True)
-    cam = plan.generator.cfg["camera"]
-    camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
-              "height": cam["height"], "depth_scale": 1.0}  # fmt: skip
-    atomic_write_text(layout.camera_path, dumps(camera))
-    atomic_write_text(layout.root / "config.json", dumps(plan.generator.cfg))
-    write_model_dir(plan.generator.model, layout.models_dir, OBJ_ID)
+    write_static_files(layout, plan.generator)
     atomic_write_text(
         layout.splits_path,
         dumps({"split_by": job.split_by, "ratios": list(job.ratios), "seed": job.seed,

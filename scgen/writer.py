@@ -2,16 +2,20 @@
 
 Each sample's files are written under temporary names and renamed; its record JSON goes last,
 so a sample is either complete on disk or absent. `finalize` rebuilds scene_gt.json,
-scene_camera.json, scene_gt_info.json and metadata.csv from the records in sample order, so the
-result is byte-identical whatever the worker count, shard layout or resume point.
+scene_camera.json, scene_gt_info.json, the test target lists and metadata.csv from the records in
+sample order, so the result is byte-identical whatever the worker count, shard layout or resume point.
+A sample is written against its dataset's static files: the depth scale of camera.json and the
+model of models/, on which scene_gt_info's full projection is measured (what bop_toolkit renders).
 """
 
 from __future__ import annotations
 
 import csv
+import functools
 import io
 from collections import defaultdict
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -19,17 +23,19 @@ import numpy as np
 
 from scgen import bop
 from scgen.annotate import Annotation
+from scgen.annotate.annotate import full_projection
 from scgen.atomic import atomic_write_bytes, atomic_write_text
 from scgen.bop import read_json
 from scgen.buffers import Buffers
 from scgen.dataset import CHUNK, OBJ_ID, Layout, dumps
 from scgen.exr import encode_xyz_exr
 from scgen.factors import occluder_config, spec_key
+from scgen.model import TargetModel
+from scgen.scenes.config import distance_range_m
 from scgen.scenes.geometry import matrix_to_quat
 from scgen.scenes.spec import SceneSpec
 from scgen.splits import viewpoint_cell
 
-DEPTH_SCALES = (0.01, 0.1, 1.0, 10.0)  # mm per depth unit; the smallest that cannot wrap is chosen
 METADATA_COLUMNS = (
     "sample_id", "split", "scene_id", "im_id", "illumination", "sun_irradiance_w_m2", "exposure_ev",
     "sun_x", "sun_y", "sun_z", "shadow", "shadow_fraction", "shadow_caster", "occlusion", "r_occ",
@@ -42,19 +48,36 @@ METADATA_COLUMNS = (
 class WriteOptions:
     rgb_format: str = "png"  # png (lossless) or jpg
     xyz_dtype: str = "float16"
-    save_depth: bool = False
+    save_depth: bool = True  # BOP uint16 depth maps (bop_toolkit's calc_gt_info and VSD need them)
 
 
-def choose_depth_scale(depth_m: np.ndarray) -> float:
-    """Smallest BOP depth_scale (mm per unit) for which the largest depth fits in uint16."""
-    max_mm = float(depth_m.max()) * bop.MM_PER_M if depth_m.size else 0.0
-    for scale in DEPTH_SCALES:
-        if max_mm / scale <= 65535:
-            return scale
-    raise ValueError(f"depth {max_mm:.0f} mm does not fit uint16 at any depth scale")
+def dataset_depth_scale(cfg: dict[str, Any], model: TargetModel) -> float:
+    """The dataset's depth scale (mm per unit): every target point fits, at the largest sampled distance
+    plus the model's radius about its origin (|z| <= |t| + |v|); what lies farther is stored as 0."""
+    radius = float(np.linalg.norm(np.asarray(model.mesh.vertices), axis=1).max())
+    return bop.depth_scale_for(distance_range_m(cfg, model.diameter)[1] + radius)
 
 
-def _png(img: np.ndarray) -> bytes:
+def dataset_target(layout: Layout) -> tuple[np.ndarray, np.ndarray, float]:
+    """(vertices in metres, faces, depth_scale): the dataset's models/ PLY and camera.json, read once per
+    process and dataset (the files are written before any sample and never change)."""
+    ply = layout.models_dir / bop.model_file(OBJ_ID)
+    return _read_target(layout.root, _mtime(ply), _mtime(layout.camera_path))
+
+
+def _mtime(path: Path) -> int:
+    return path.stat().st_mtime_ns if path.exists() else -1
+
+
+@functools.lru_cache(maxsize=4)
+def _read_target(root: Path, *_stamps: int) -> tuple[np.ndarray, np.ndarray, float]:
+    mesh = bop.read_model_mesh(root, OBJ_ID)
+    depth_scale = float(read_json(Layout(root).camera_path)["depth_scale"])
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces), depth_scale
+
+
+def encode_png(img: np.ndarray) -> bytes:
+    """A PNG file of an 8- or 16-bit image (masks, depth, BGR colour)."""
     ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 3])
     assert ok
     return buf.tobytes()
@@ -65,7 +88,7 @@ def encode_rgb(rgb: np.ndarray, fmt: str) -> bytes:
         ok, buf = cv2.imencode(".jpg", rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 95])
         assert ok
         return buf.tobytes()
-    return _png(rgb[..., ::-1])
+    return encode_png(rgb[..., ::-1])
 
 
 def write_sample(
@@ -81,8 +104,8 @@ def write_sample(
     for p in paths.values():
         p.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(paths["rgb"], encode_rgb(buffers.rgb, opts.rgb_format))
-    atomic_write_bytes(paths["mask"], _png(ann.mask.astype(np.uint8) * 255))
-    atomic_write_bytes(paths["mask_visib"], _png(ann.mask_visib.astype(np.uint8) * 255))
+    atomic_write_bytes(paths["mask"], encode_png(ann.mask.astype(np.uint8) * 255))
+    atomic_write_bytes(paths["mask_visib"], encode_png(ann.mask_visib.astype(np.uint8) * 255))
     xyz_box = None
     if ann.px_count_visib > 0:
         x, y, w, h = ann.bbox_visib
@@ -90,22 +113,33 @@ def write_sample(
         xyz_path = layout.xyz(split, sid)
         xyz_path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(xyz_path, encode_xyz_exr(ann.xyz[y : y + h, x : x + w], opts.xyz_dtype))
-    depth_scale = 1.0
+    vertices, faces, depth_scale = dataset_target(layout)
+    depth = bop.encode_depth(buffers.depth, depth_scale)
     if opts.save_depth:
-        depth_scale = choose_depth_scale(buffers.depth)
         depth_path = layout.depth(split, sid)
         depth_path.parent.mkdir(parents=True, exist_ok=True)
-        depth_u16 = np.round(buffers.depth * bop.MM_PER_M / depth_scale).astype(np.uint16)
-        atomic_write_bytes(depth_path, _png(depth_u16))
-    record = build_record(spec, ann, split, xyz_box, depth_scale)
+        atomic_write_bytes(depth_path, encode_png(depth))
+    vertices_cam = vertices @ spec.target.R_mat.T + spec.target.t_vec
+    gt_info = gt_info_entry(spec.camera.K_mat, ann, vertices_cam, faces, depth, xyz_box)
+    record = build_record(spec, ann, split, gt_info, depth_scale)
     record_path = layout.record(split, sid)
     record_path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(record_path, dumps(record))
     return record
 
 
+def gt_info_entry(K: np.ndarray, ann: Annotation, vertices_cam: np.ndarray, faces: np.ndarray,
+                  depth: np.ndarray, xyz_box: list[int] | None) -> dict[str, Any]:  # fmt: skip
+    """The scene_gt_info.json entry of a rendered sample: the whole projection measured by
+    `full_projection`, px_count_valid = silhouette pixels inside the image with a depth value."""
+    px_count_all, bbox_obj = full_projection(ann.mask, K, vertices_cam, faces)
+    return bop.gt_info_entry(
+        px_count_all, bbox_obj, ann.mask_visib, int((ann.mask & (depth > 0)).sum()), xyz_box
+    )
+
+
 def build_record(
-    spec: SceneSpec, ann: Annotation, split: str, xyz_box: list[int] | None, depth_scale: float
+    spec: SceneSpec, ann: Annotation, split: str, gt_info: dict[str, Any], depth_scale: float
 ) -> dict[str, Any]:
     """Everything finalize needs for the BOP JSON files and the metadata row of one sample."""
     R, t = spec.target.R_mat, spec.target.t_vec
@@ -151,10 +185,7 @@ def build_record(
         "scene_gt": [bop.gt_entry(R, t, OBJ_ID)],
         "scene_camera": {"cam_K": list(spec.camera.K), "depth_scale": depth_scale,
                          "exposure_ev": spec.camera.exposure_ev},
-        "scene_gt_info": [{"bbox_obj": ann.bbox_obj, "bbox_visib": ann.bbox_visib,
-                           "px_count_all": ann.px_count_all, "px_count_valid": ann.px_count_all,
-                           "px_count_visib": ann.px_count_visib, "visib_fract": ann.visib_fract,
-                           "xyz_box": xyz_box}],
+        "scene_gt_info": [gt_info],
         "metadata": meta,
         "spec": spec.to_dict(),
     }  # fmt: skip
@@ -171,6 +202,8 @@ def finalize(layout: Layout) -> int:
         d = layout.chunk_dir(split, recs[0]["sample_id"])
         for name in bop.SCENE_FILES:
             atomic_write_text(bop.scene_file(d, name), dumps({str(r["sample_id"]): r[name] for r in recs}))
+    for kind, targets in target_lists([r for r in records if r["split"] == bop.TEST_SPLIT]).items():
+        atomic_write_text(layout.test_targets(kind), dumps(targets))
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=METADATA_COLUMNS, lineterminator="\n")
     writer.writeheader()
@@ -178,6 +211,16 @@ def finalize(layout: Layout) -> int:
         writer.writerow({k: _fmt(r["metadata"][k]) for k in METADATA_COLUMNS})
     atomic_write_text(layout.metadata_path, out.getvalue())
     return len(records)
+
+
+def target_lists(test_records: list[dict[str, Any]]) -> dict[str, list[dict[str, int]]]:
+    """{"bop19": [...], "bop24": [...]}: the test target lists of the test samples' records (in order)."""
+    ids = [(r["sample_id"] // CHUNK, r["sample_id"]) for r in test_records]
+    with_gt = [
+        (scene, im, r["scene_gt"], r["scene_gt_info"])
+        for (scene, im), r in zip(ids, test_records, strict=True)
+    ]
+    return {"bop19": bop.targets_bop19(with_gt), "bop24": bop.targets_bop24(ids)}
 
 
 def _fmt(v: Any) -> str:

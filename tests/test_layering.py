@@ -25,7 +25,7 @@ def loaded_modules(*modules: str) -> set[str]:
 
 @pytest.mark.parametrize(
     "modules",
-    [("scgen.scenes", "scgen.annotate", "scgen.factors", "scgen.bop"), ("posenet.cli",)],
+    [("scgen.scenes", "scgen.annotate", "scgen.factors", "scgen.bop", "scgen.bop_dataset"), ("posenet.cli",)],
     ids=["scenes-annotate", "posenet"],
 )
 def test_no_renderer_is_imported(modules: tuple[str, ...]) -> None:

@@ -23,7 +23,6 @@ from scgen.model import load_target
 from scgen.render.base import create_backend
 from scgen.scenes import SceneSpec, load_config, sample_scene
 from scgen.scenes.silhouette import TargetShape
-from scgen.writer import WriteOptions
 from tests.conftest import SMALL, render_dataset
 
 
@@ -153,16 +152,18 @@ def test_user_mesh_is_normalised(tmp_path: Path):
     assert load_target(mesh_path, keep_scale=True).diameter == pytest.approx(np.sqrt(14))
 
 
-def test_saved_depth_round_trips_without_wrapping(tmp_path: Path):
-    out = render_dataset(tmp_path / "depth", n=3, write=WriteOptions(save_depth=True))
-    layout, model = Layout(out), load_target()
+def test_saved_depth_round_trips_without_wrapping(small_dataset: Path):
+    """Depth is on by default, one scale per dataset; what lies beyond its range is 0, never wrapped."""
+    layout, model = Layout(small_dataset), load_target()
     backend = create_backend("mitsuba", model, quality="draft")
     for i in range(3):
         split = _split(layout, i)
         scale = read_json(layout.record(split, i))["scene_camera"]["depth_scale"]
+        assert scale == read_json(layout.camera_path)["depth_scale"]
         stored = cv2.imread(str(layout.depth(split, i)), cv2.IMREAD_UNCHANGED)
         assert stored.dtype == np.uint16
         spec = SceneSpec.from_dict(read_json(layout.record(split, i))["spec"])
         depth = backend.render(spec).depth
-        assert np.abs(stored * scale / 1000.0 - depth).max() <= 0.5 * scale / 1000.0 + 1e-6
-        assert depth.max() * 1000.0 / scale <= 65535
+        fits = depth * 1000.0 / scale <= 65535
+        assert np.abs(stored * scale / 1000.0 - depth)[fits].max() <= 0.5 * scale / 1000.0 + 1e-6
+        assert (stored[~fits] == 0).all() and fits[depth <= spec.distance_m + model.diameter].all()

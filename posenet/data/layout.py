@@ -16,13 +16,15 @@ from scgen import bop
 
 @dataclass(frozen=True)
 class Instance:
-    """One annotated object instance in one image. Poses in metres, boxes [x, y, w, h] in pixels."""
+    """One annotated object instance in one image. Poses in metres; boxes [x, y, w, h] cover pixels
+    x .. x + w - 1 (BOP's boxes, w = max - min, are converted on reading by bop.box_pixels); bbox_obj
+    is the whole projection, so it may reach past the image."""
 
     split: str
     obj_id: int
     scene_id: int
     im_id: int
-    inst: int
+    inst: int  # index in the image's scene_gt list, whatever the objects: it names the mask and xyz files
     rgb: Path
     mask: Path
     mask_visib: Path
@@ -57,7 +59,8 @@ def _has_gt(scene: Path) -> bool:
 
 
 def scan_split(root: Path, split: str, obj_id: int) -> list[Instance]:
-    """Every instance of object `obj_id` in `root/split/*/`, sorted by (scene_id, im_id, inst)."""
+    """Every instance of object `obj_id` in `root/split/*/`, sorted by (scene_id, im_id, inst); the
+    instances of other objects in the same images are skipped, their files never opened."""
     size = image_size(root)
     split_dir = root / split
     scenes = sorted(p for p in split_dir.glob("[0-9]*") if _has_gt(p))
@@ -119,10 +122,17 @@ def _instance(
         K=K,
         R=R,
         t=t,
-        bbox_obj=tuple(int(v) for v in info["bbox_obj"]),
-        bbox_visib=tuple(int(v) for v in info["bbox_visib"]),
-        xyz_box=tuple(int(v) for v in info.get("xyz_box", info["bbox_visib"])),
+        bbox_obj=bop.box_pixels(info["bbox_obj"]),
+        bbox_visib=bop.box_pixels(info["bbox_visib"]),
+        xyz_box=_xyz_box(info),
         visib_fract=float(info["visib_fract"]),
         px_count_visib=int(info["px_count_visib"]),
         image_size=size,
     )
+
+
+def _xyz_box(info: dict) -> tuple[int, int, int, int]:
+    """The pixels an instance's xyz crop covers: scgen's `xyz_box`, else (no xyz map: none in the
+    dataset, or nothing visible, xyz_box null) those of its visible box."""
+    box = info.get("xyz_box")
+    return bop.box_pixels(info["bbox_visib"]) if box is None else tuple(int(v) for v in box)

@@ -111,8 +111,8 @@ class MitsubaBackend:
 
         W, H = spec.camera.width, spec.camera.height
         rays_cam = spec.camera.pixel_directions().reshape(-1, 3)
-        t_all, idx_all, normal = _cast(geo_all, target + props, rays_cam)
-        t_tgt, _, _ = _cast(geo_target, [], rays_cam)
+        t_all, idx_all, normal = cast_rays(geo_all, target + props, rays_cam)
+        t_tgt, _, _ = cast_rays(geo_target, [], rays_cam)
         z_scale = rays_cam[:, 2]
         depth = np.where(np.isfinite(t_all), t_all * z_scale, 0.0).reshape(H, W).astype(np.float32)
         target_depth = np.where(np.isfinite(t_tgt), t_tgt * z_scale, 0.0).reshape(H, W).astype(np.float32)
@@ -195,7 +195,7 @@ class MitsubaBackend:
         return linear_to_srgb8(composite)
 
 
-def _cast(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def cast_rays(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ray length, index of the hit shape in `shapes` (-1 = miss) and geometric normal, rays from origin."""
     o = mi.Point3f(0.0, 0.0, 0.0)
     ray = mi.Ray3f(o, mi.Vector3f(dirs[:, 0], dirs[:, 1], dirs[:, 2]))
