@@ -16,7 +16,7 @@ from posenet.config import load_config
 from posenet.data.boxes import boxes_from_gt
 from posenet.data.layout import scan_split
 from posenet.errors import PosenetError
-from posenet.evaluate import BATCH_SIZE, evaluate, format_table
+from posenet.evaluate import BATCH_SIZE, bop_results_csv, evaluate, format_table
 from posenet.evaluate import by_factor as run_by_factor
 from posenet.models import VARIANTS
 from posenet.train import train as run_train
@@ -57,6 +57,12 @@ def main() -> None:
 @click.option(
     "--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config is given)."
 )
+@click.option(
+    "--obj-id",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Object to train on  [default: the config's data.obj_id, 1]",
+)
 @one_line_errors(PosenetError, ScgenError)
 def train(
     data: Path,
@@ -66,14 +72,14 @@ def train(
     epochs: int | None,
     max_steps: int | None,
     resume: bool,
+    obj_id: int | None,
 ) -> None:
     """Train on the dataset's train split (under torchrun: DDP over the processes)."""
     if config is None:
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "paper"
-    ckpt = run_train(
-        data, out, load_config(config, variant=variant, epochs=epochs), resume=resume, max_steps=max_steps
-    )
+    cfg = load_config(config, variant=variant, epochs=epochs, obj_id=obj_id)
+    ckpt = run_train(data, out, cfg, resume=resume, max_steps=max_steps)
     if os.environ.get("RANK", "0") == "0":  # torchrun: one line, not one per process
         click.echo(f"checkpoint: {ckpt}")
 
@@ -102,6 +108,13 @@ def train(
     show_default=True,
     help="RoIs per forward (the results do not depend on it; latency is timed apart at batch 1).",
 )
+@click.option(
+    "--obj-id",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Object to evaluate  [default: the one the checkpoint was trained on]",
+)
+@click.option("--bop-csv", type=PATH, default=None, help="Also write the estimates as a BOP19 results CSV.")
 @one_line_errors(PosenetError, ScgenError)
 def eval_cmd(
     data: Path,
@@ -113,31 +126,43 @@ def eval_cmd(
     by_factor: Path | None,
     workers: int,
     batch_size: int,
+    obj_id: int | None,
+    bop_csv: Path | None,
 ) -> None:
-    """Rotation/translation error, ADD@0.02 m, ADD@0.1d, ADD-S@0.1d, ESA score and batch-1 latency."""
+    """Rotation/translation error, ADD@0.02 m, ADD@0.1d, ADD-S@0.1d, MSSD, ESA score and batch-1 latency.
+
+    For an object with symmetries (models_info), ADD is ADD-S and the rotation error is also given as
+    the smallest over the symmetric poses of the ground truth.
+    """
     if by_factor is not None:
-        res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers, batch_size)
+        if bop_csv is not None:
+            raise PosenetError("--bop-csv writes the estimates of one checkpoint, not a --by-factor table")
+        res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers, batch_size, obj_id)
         cols = res["columns"]
         rows = [
             [f"{factor}/{group}", str(res["n"][factor][group]), *(_percent(vals[c]) for c in cols)]
             for factor, groups in res["groups"].items()
             for group, vals in groups.items()
         ]
-        click.echo(format_table(["ADD@0.02m (%)", "n", *cols], rows))
+        click.echo(format_table([f"{res['add_metric']}@0.02m (%)", "n", *cols], rows))
         if json_path is not None:
             atomic_write_text(json_path, json.dumps(res, indent=2) + "\n")
         return
     if len(ckpt) != 1:
         raise PosenetError("several --ckpt are only compared with --by-factor")
-    result = evaluate(data, ckpt[0], split, boxes, workers=workers, batch_size=batch_size)
+    result = evaluate(data, ckpt[0], split, boxes, workers=workers, batch_size=batch_size, obj_id=obj_id)
     s = result.summary
+    add = s["add_metric"]
     rows = [
         ["samples", f"{s['n']}"],
         ["rotation error (deg)", f"{s['re_deg']:.3f}"],
+        ["rotation error, symmetry-aware (deg)", f"{s['re_sym_deg']:.3f}"],
         ["translation error (m)", f"{s['te_m']:.4f}"],
-        ["ADD@0.02m (%)", f"{100 * s['add_0.02m']:.2f}"],
-        ["ADD@0.1d (%)", f"{100 * s['add_0.1d']:.2f}"],
+        [f"{add}@0.02m (%)", f"{100 * s['add_0.02m']:.2f}"],
+        [f"{add}@0.1d (%)", f"{100 * s['add_0.1d']:.2f}"],
         ["ADD-S@0.1d (%)", f"{100 * s['adds_0.1d']:.2f}"],
+        ["MSSD@0.1d (%)", f"{100 * s['mssd_0.1d']:.2f}"],
+        ["AR_MSSD (%)", f"{100 * s['ar_mssd']:.2f}"],
         ["ESA score", f"{s['esa']:.4f}"],
         ["latency, batch 1 (ms)", f"{s['latency_ms']:.2f}"],
     ]
@@ -154,6 +179,9 @@ def eval_cmd(
             json_path, json.dumps({"variant": result.variant, "split": split, **s}, indent=2) + "\n"
         )
     click.echo(f"predictions: {predictions}")
+    if bop_csv is not None:
+        atomic_write_text(bop_csv, bop_results_csv(result.records))
+        click.echo(f"BOP results: {bop_csv}")
 
 
 @main.command()
@@ -163,7 +191,7 @@ def eval_cmd(
 @click.option("--noise", type=click.FloatRange(min=0), default=0.0, show_default=True,
               help="Relative std of centre shift and log size change (0: exact GT boxes).")  # fmt: skip
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--obj-id", type=int, default=1, show_default=True)
+@click.option("--obj-id", type=click.IntRange(min=1), default=1, show_default=True, help="Object to box.")
 @one_line_errors(PosenetError, ScgenError)
 def boxes(data: Path, out: Path, split: str, noise: float, seed: int, obj_id: int) -> None:
     """Write one box per image of a split from the GT full-object boxes, optionally perturbed."""

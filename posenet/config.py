@@ -32,7 +32,7 @@ from posenet.models import PRESETS, ModelConfig
 class DataConfig:
     """Reading, cropping and augmenting samples (probabilities are per sample)."""
 
-    obj_id: int = 1
+    obj_id: int = 1  # the object trained and evaluated (BOP obj_id; `--obj-id`)
     pad_scale: float = 1.5  # DZI: crop side = max(w, h) * pad_scale
     min_visib_fract: float = 0.0  # > 0: training also skips instances this little visible (GDR-Net: 0.3)
     num_pm_points: int = 3000
@@ -122,7 +122,9 @@ def smoke_config() -> TrainConfig:
     )
 
 
-def load_config(name_or_path: str, variant: str | None = None, epochs: int | None = None) -> TrainConfig:
+def load_config(
+    name_or_path: str, variant: str | None = None, epochs: int | None = None, obj_id: int | None = None
+) -> TrainConfig:
     """A preset name or a YAML/TOML file, then the command-line overrides; validated."""
     raw = {"preset": name_or_path} if name_or_path in PRESETS else _read_file(Path(name_or_path))
     cfg = config_from_dict(raw)
@@ -130,6 +132,8 @@ def load_config(name_or_path: str, variant: str | None = None, epochs: int | Non
         cfg.variant = variant
     if epochs is not None:
         cfg.optim.epochs = epochs
+    if obj_id is not None:
+        cfg.data.obj_id = obj_id
     _validate(cfg)
     return cfg
 

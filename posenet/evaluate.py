@@ -1,14 +1,16 @@
-"""Evaluation: pose errors, ADD/ADD-S recalls, ESA score and batch-1 latency of a checkpoint on a split.
+"""Evaluation: pose errors, ADD/ADD-S/MSSD recalls, ESA score and batch-1 latency of a checkpoint on a split.
 
 `evaluate` runs the split in batches and returns the summary and one record per instance; the latency
 is measured apart, at batch 1, as `posenet bench` measures it. `by_factor` gives the paper's Table 5:
 ADD@0.02 m per (factor, group) over fixed sample lists, one column per variant, checkpoints of the same
-variant averaged.
+variant averaged. `bop_results_csv` writes the records as a BOP19 results file.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,10 +23,12 @@ from posenet.bench import dummy_inputs, measure_latency_ms
 from posenet.checkpoint import load_checkpoint
 from posenet.config import config_from_dict
 from posenet.data import open_split
+from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose
-from posenet.metrics import sample_errors, summarise
+from posenet.metrics import headline_add, sample_errors, summarise
 from posenet.models import PoseNet, create_model
+from scgen import bop
 
 BATCH_SIZE = 32
 LATENCY_WARMUP = 5  # untimed batch-1 forwards (allocator, cuDNN autotuning)
@@ -34,7 +38,7 @@ LATENCY_ITERS = 20  # timed ones; the latency is their median
 @dataclass
 class EvalResult:
     variant: str
-    summary: dict[str, float]  # see metrics.summarise, plus latency_ms and fps
+    summary: dict[str, Any]  # see metrics.summarise, plus latency_ms and fps
     records: list[dict[str, Any]]  # one per instance: ids, predicted pose, errors
 
 
@@ -51,22 +55,44 @@ def load_model(ckpt: Path, device: torch.device) -> tuple[PoseNet, dict[str, Any
 
 @torch.inference_mode()
 def predict(
-    model: PoseNet, loader: DataLoader, points: torch.Tensor, device: torch.device
+    model: PoseNet, loader: DataLoader, obj: ObjectModel, device: torch.device
 ) -> tuple[list[dict[str, Any]], dict[str, list[float]]]:
-    """Records in loader order (scene_id, im_id, R row-major, t in metres, each error of
-    metrics.sample_errors) and each error's list over them, for metrics.summarise."""
+    """Records in loader order (scene_id, im_id, obj_id, R row-major, t in metres, time_s, each error of
+    metrics.sample_errors) and each error's list over them, for metrics.summarise.
+
+    Each batch's network forward and pose decoding is timed and shared evenly among its RoIs; time_s is
+    the sum of these shares over the image's instances (see per_image_times; reading and cropping are not
+    included).
+    """
+    geometry = [torch.from_numpy(a).to(device) for a in (obj.pm_points, obj.vertices, obj.symmetries)]
     records: list[dict[str, Any]] = []
     errors: dict[str, list[float]] = {}
     for batch in loader:
         b = {k: v.to(device) for k, v in batch.items()}
+        tic = time.perf_counter()
         R, t = decode_pose(model(b["roi_img"], b["roi_coord2d"]), b)
-        errs = {k: v.tolist() for k, v in sample_errors(R, t, b["R"], b["t"], points).items()}
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+        share = (time.perf_counter() - tic) / len(R)
+        errs = {k: v.tolist() for k, v in sample_errors(R, t, b["R"], b["t"], *geometry).items()}
         for k, v in errs.items():
             errors.setdefault(k, []).extend(v)
         per_instance = [dict(zip(errs, e, strict=True)) for e in zip(*errs.values(), strict=True)]
         rows = zip(batch["key"].tolist(), R.flatten(1).tolist(), t.tolist(), per_instance, strict=True)
-        records += [{"scene_id": s, "im_id": i, "R": R_i, "t": t_i, **e} for (s, i), R_i, t_i, e in rows]
-    return records, errors
+        records += [
+            {"scene_id": s, "im_id": i, "obj_id": obj.obj_id, "R": R_i, "t": t_i, "time_s": share, **e}
+            for (s, i), R_i, t_i, e in rows
+        ]
+    return per_image_times(records), errors
+
+
+def per_image_times(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The records with each instance's time_s replaced by the sum over its image's instances: every
+    estimate of an image then carries the image's time, as BOP's results file requires."""
+    total: dict[tuple[int, int], float] = {}
+    for r in records:
+        total[r["scene_id"], r["im_id"]] = total.get((r["scene_id"], r["im_id"]), 0.0) + r["time_s"]
+    return [{**r, "time_s": total[r["scene_id"], r["im_id"]]} for r in records]
 
 
 def evaluate(
@@ -77,24 +103,41 @@ def evaluate(
     image_ids: set[int] | None = None,
     workers: int = 2,
     batch_size: int = BATCH_SIZE,
+    obj_id: int | None = None,
 ) -> EvalResult:
-    """Run the checkpoint over the split on the current device (GPU if any), `batch_size` RoIs at a time.
+    """Run the checkpoint over the split's instances of object `obj_id` (default: the object it was
+    trained on) on the current device (GPU if any), `batch_size` RoIs at a time.
 
-    The batch size changes neither the records nor the summary (beyond float rounding); `latency_ms` is
-    the batch-1 network forward, timed by `posenet.bench.measure_latency_ms` on the same device.
+    The batch size changes neither the records (beyond float rounding and their time_s) nor the summary;
+    `latency_ms` is the batch-1 network forward, timed by `posenet.bench.measure_latency_ms` on the same
+    device.
     """
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     model, state = load_model(ckpt, device)
-    cfg = config_from_dict(state["config"])
+    data_cfg = config_from_dict(state["config"]).data
+    if obj_id is not None:
+        data_cfg = dataclasses.replace(data_cfg, obj_id=obj_id)
     dataset = open_split(
-        data, split, cfg.data, model.config, train=False, boxes_file=boxes, image_ids=image_ids
+        data, split, data_cfg, model.config, train=False, boxes_file=boxes, image_ids=image_ids
     )
-    points = torch.from_numpy(dataset.obj.pm_points).to(device)  # uniform surface points, as the PM loss
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, num_workers=workers)
-    records, errors = predict(model, loader, points, device)
+    records, errors = predict(model, loader, dataset.obj, device)
     latency = measure_latency_ms(model, dummy_inputs(model.config, device), LATENCY_WARMUP, LATENCY_ITERS)
-    summary = {**summarise(errors, dataset.obj.diameter), "latency_ms": latency, "fps": 1000 / latency}
+    summary = summarise(errors, dataset.obj.diameter, dataset.obj.symmetric)
+    summary |= {"latency_ms": latency, "fps": 1000 / latency}
     return EvalResult(state["model_config"]["variant"], summary, records)
+
+
+def bop_results_csv(records: list[dict[str, Any]]) -> str:
+    """The records as a BOP19 results file: `scene_id,im_id,obj_id,score,R,t,time`, R row-major and t in
+    mm, space-separated; time = the image's seconds (the same for each of its estimates); score 1.0 (the
+    network gives no confidence)."""
+    lines = ["scene_id,im_id,obj_id,score,R,t,time"]
+    for r in records:
+        R = " ".join(repr(float(v)) for v in r["R"])
+        t = " ".join(repr(float(v) * bop.MM_PER_M) for v in r["t"])
+        lines.append(f"{r['scene_id']},{r['im_id']},{r['obj_id']},1.0,{R},{t},{r['time_s']!r}")
+    return "\n".join(lines) + "\n"
 
 
 def read_groups(path: Path) -> tuple[str | None, dict[str, dict[str, list[int]]]]:
@@ -118,8 +161,10 @@ def by_factor(
     boxes: Path | None = None,
     workers: int = 2,
     batch_size: int = BATCH_SIZE,
+    obj_id: int | None = None,
 ) -> dict[str, Any]:
-    """ADD@0.02 m per (factor, group) and variant; sample ids are image ids (scgen: im_id = sample_id).
+    """ADD@0.02 m (the headline ADD: ADD-S for a symmetric object, `add_metric`) per (factor, group) and
+    variant; sample ids are image ids (scgen: im_id = sample_id).
 
     The groups file's own split, when it names one, overrides `split`. A grouped image whose target is
     not visible is not evaluated; `n` gives the images each group's value is over (None when 0).
@@ -128,9 +173,12 @@ def by_factor(
     split = file_split or split
     wanted = {i for gs in groups.values() for ids in gs.values() for i in ids}
     per_variant: dict[str, list[dict[int, float]]] = {}
+    names: set[str] = set()
     for ckpt in ckpts:
-        result = evaluate(data, ckpt, split, boxes, wanted, workers, batch_size)
-        per_variant.setdefault(result.variant, []).append({r["im_id"]: r["add_m"] for r in result.records})
+        result = evaluate(data, ckpt, split, boxes, wanted, workers, batch_size, obj_id)
+        key, name = headline_add(result.summary["symmetric"])
+        names.add(name)
+        per_variant.setdefault(result.variant, []).append({r["im_id"]: r[key] for r in result.records})
     evaluated = set.intersection(*(set(run) for runs in per_variant.values() for run in runs))
 
     def recall(ids: list[int], runs: list[dict[int, float]]) -> float | None:
@@ -139,6 +187,7 @@ def by_factor(
 
     return {
         "metric": "add_0.02m",
+        "add_metric": "/".join(sorted(names)),
         "split": split,
         "columns": list(per_variant),
         "runs": {v: len(r) for v, r in per_variant.items()},

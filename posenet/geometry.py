@@ -79,6 +79,13 @@ def site_decode(site: Tensor, K: Tensor, crop_center: Tensor, box_wh: Tensor, re
     return torch.stack((tx, ty, tz), dim=-1)
 
 
+def symmetric_poses(R: Tensor, t: Tensor, symmetries: Tensor) -> tuple[Tensor, Tensor]:
+    """Every pose showing the same view of the object as (R, t): (R·S_R, R·S_t + t) for each of its (K, 4, 4)
+    symmetry transforms S (model frame, identity included); shapes (..., K, 3, 3) and (..., K, 3)."""
+    R_k = R[..., None, :, :]
+    return R_k @ symmetries[:, :3, :3], (R_k @ symmetries[:, :3, 3:]).squeeze(-1) + t[..., None, :]
+
+
 def decode_pose(out: dict[str, Tensor], roi: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
     """Egocentric (R, t) from network outputs (allocentric `rot6d`, `site`) and a batch's RoI geometry
     (`K`, `crop_center`, `box_wh`, `resize_ratio`)."""

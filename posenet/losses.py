@@ -1,15 +1,20 @@
 """GDR-Net training losses (paper eq. 7-8): coord, mask, region, point matching, centroid, z.
 
-Each term is a pure function of predictions and targets; `pose_losses` weights and sums them.
+Each term is a pure function of predictions and targets; `pose_losses` weights and sums them. The point
+matching term of a symmetric object is the minimum over the symmetric poses of the GT (GDR-Net's
+PM_LOSS_SYM).
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
+import torch
 import torch.nn.functional as F
 from torch import Tensor
 
 from posenet.config import LossConfig
-from posenet.geometry import decode_pose
+from posenet.geometry import decode_pose, symmetric_poses
 
 LOSS_TERMS = ("coord", "mask", "region", "pm", "cent", "z")  # paper eq. 7
 
@@ -42,17 +47,47 @@ def pm_loss(R_pred: Tensor, R_gt: Tensor, points: Tensor) -> Tensor:
     return 3.0 * diff.abs().mean()
 
 
+class PmObject(NamedTuple):
+    """The object as the point-matching loss sees it (posenet.train.pm_loss_points builds it)."""
+
+    points: Tensor  # (N, 3) model points scaled by 1 / max(extent), so that the loss is unit-free
+    symmetries: Tensor  # (K, 4, 4) the object's symmetry transforms, identity first; their rotations enter
+
+
+def closest_symmetric_rotation(
+    R_pred: Tensor, R_gt: Tensor, t_gt: Tensor, obj: PmObject, max_block: int = 2**22
+) -> Tensor:
+    """Per sample, the rotation of the GT's symmetric pose with the smallest PM loss against R_pred.
+
+    pm_loss against it is the minimum over the symmetric poses of the GT (GDR-Net picks the pose of the
+    smallest angle instead; both pick the pose R_pred equals, if any). The choice carries no gradient, and
+    the candidates are scored at most `max_block` coordinates at a time.
+    """
+    if len(obj.symmetries) == 1:
+        return R_gt  # no symmetry, no choice: the plain loss, step for step
+    with torch.no_grad():
+        candidates, _ = symmetric_poses(R_gt, t_gt, obj.symmetries)  # (B, K, 3, 3)
+        diff = R_pred.detach()[:, None] - candidates
+        chunk = max(1, max_block // (len(diff) * obj.points.numel()))
+        blocks = diff.split(chunk, dim=1)  # one matrix product each: (B * k * 3, 3) @ (3, N)
+        err = torch.cat(
+            [(d.reshape(-1, 3) @ obj.points.T).abs().reshape(*d.shape[:2], -1).mean(-1) for d in blocks], 1
+        )
+        return candidates[torch.arange(len(diff), device=diff.device), err.argmin(1)]
+
+
 def pose_losses(
-    out: dict[str, Tensor], batch: dict[str, Tensor], pm_points: Tensor, cfg: LossConfig
+    out: dict[str, Tensor], batch: dict[str, Tensor], pm: PmObject, cfg: LossConfig
 ) -> tuple[Tensor, dict[str, Tensor]]:
     """(weighted total, {term: unweighted value}) for one batch of network outputs and dataset targets."""
     visible = batch["roi_mask_visib"]
     R_pred, _ = decode_pose(out, batch)
+    R_target = closest_symmetric_rotation(R_pred, batch["R"], batch["t"], pm)
     terms = {
         "coord": coord_loss(out["xyz"], batch["roi_xyz"], visible),
         "mask": mask_loss(out["mask"], visible, cfg.mask_type),
         "region": region_loss(out["region"], batch["roi_region"], visible),
-        "pm": pm_loss(R_pred, batch["R"], pm_points),
+        "pm": pm_loss(R_pred, R_target, pm.points),
         "cent": F.l1_loss(out["site"][:, :2], batch["site"][:, :2]),
         "z": F.l1_loss(out["site"][:, 2], batch["site"][:, 2]),
     }

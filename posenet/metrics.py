@@ -1,24 +1,35 @@
 """Pose metrics per sample (batched torch, float64) and their dataset summary.
 
-Rotation / translation error, ADD and ADD-S (BOP's ADD / ADI), and the ESA (SPEC) score with the
-SPEC2021 calibration-precision thresholds applied independently to each term, as in SPNv2.
+Rotation / translation error (the rotation error also as the minimum over the GT's symmetric poses), ADD
+and ADD-S (BOP's ADD / ADI), MSSD (BOP19), and the ESA (SPEC) score with the SPEC2021 calibration-precision
+thresholds applied independently to each term, as in SPNv2.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import torch
 from torch import Tensor
 
+from posenet.geometry import symmetric_poses
+
 ESA_THETA_Q_DEG = 0.169  # rotation errors below this count as 0 (SPEC2021 / SPEED+ HIL)
 ESA_THETA_T = 2.173e-3  # normalised translation errors below this (2.173 mm per metre) count as 0
+MSSD_THRESHOLDS = tuple(0.05 * k for k in range(1, 11))  # BOP19's AR_MSSD: 0.05..0.5 of the diameter
 
 
 def rotation_error_deg(R_pred: Tensor, R_gt: Tensor) -> Tensor:
     """arccos((tr(R_pred^T R_gt) - 1) / 2) in degrees."""
     cos = ((R_pred.transpose(-1, -2) @ R_gt).diagonal(dim1=-2, dim2=-1).sum(-1) - 1.0) / 2.0
     return torch.rad2deg(torch.arccos(cos.clamp(-1.0, 1.0)))
+
+
+def rotation_error_sym_deg(R_pred: Tensor, R_gt: Tensor, t_gt: Tensor, symmetries: Tensor) -> Tensor:
+    """The smallest rotation error (degrees) to any of the GT's symmetric poses ((K, 4, 4) `symmetries`)."""
+    R_sym, _ = symmetric_poses(R_gt, t_gt, symmetries)
+    return rotation_error_deg(R_pred[..., None, :, :], R_sym).amin(-1)
 
 
 def translation_error(t_pred: Tensor, t_gt: Tensor) -> Tensor:
@@ -49,6 +60,31 @@ def adds_error(
     return torch.cat(nearest, dim=-1).mean(-1)
 
 
+def mssd_error(
+    R_pred: Tensor,
+    t_pred: Tensor,
+    R_gt: Tensor,
+    t_gt: Tensor,
+    vertices: Tensor,
+    symmetries: Tensor,
+    max_block: int = 2**22,
+) -> Tensor:
+    """MSSD (BOP19): over the GT's symmetric poses, the smallest largest distance between a model vertex
+    under the predicted pose and under that pose.
+
+    A distance's maximum over a mesh lies at a vertex, so the vertices give the surface's exact maximum.
+    Chunked over the symmetries so that one block holds at most `max_block` coordinates.
+    """
+    R_sym, t_sym = symmetric_poses(R_gt, t_gt, symmetries)
+    dR, dt = R_pred[..., None, :, :] - R_sym, t_pred[..., None, :] - t_sym  # (R_e - R_s) x + (t_e - t_s)
+    chunk = max(1, max_block // (dR[..., 0, 0, 0].numel() * vertices.numel()))  # symmetries per block
+    worst = [
+        (vertices @ r.transpose(-1, -2) + d[..., None, :]).norm(dim=-1).amax(-1)
+        for r, d in zip(dR.split(chunk, dim=-3), dt.split(chunk, dim=-2), strict=True)
+    ]
+    return torch.cat(worst, dim=-1).amin(-1)
+
+
 def esa_score(R_pred: Tensor, t_pred: Tensor, R_gt: Tensor, t_gt: Tensor) -> Tensor:
     """Per-image ESA score e_q (rad) + e_t / |t_gt|, each term zeroed below its threshold."""
     e_q = rotation_error_deg(R_pred, R_gt)
@@ -59,23 +95,44 @@ def esa_score(R_pred: Tensor, t_pred: Tensor, R_gt: Tensor, t_gt: Tensor) -> Ten
 
 
 def sample_errors(
-    R_pred: Tensor, t_pred: Tensor, R_gt: Tensor, t_gt: Tensor, points: Tensor
+    R_pred: Tensor,
+    t_pred: Tensor,
+    R_gt: Tensor,
+    t_gt: Tensor,
+    points: Tensor,
+    vertices: Tensor,
+    symmetries: Tensor,
 ) -> dict[str, Tensor]:
-    """Every per-sample error, shape (B,) each: re_deg, te_m, add_m, adds_m, esa."""
+    """Every per-sample error, shape (B,) each: re_deg, re_sym_deg, te_m, add_m, adds_m, mssd_m, esa.
+
+    ADD and ADD-S use the surface `points`, MSSD the model `vertices`; re_sym_deg and MSSD the object's
+    (K, 4, 4) `symmetries` (K = 1: re_sym_deg = re_deg).
+    """
     args = [x.double() for x in (R_pred, t_pred, R_gt, t_gt)]
-    pts = points.double()
+    pts, verts, syms = points.double(), vertices.double(), symmetries.double()
     return {
         "re_deg": rotation_error_deg(args[0], args[2]),
+        "re_sym_deg": rotation_error_sym_deg(args[0], args[2], args[3], syms),
         "te_m": translation_error(args[1], args[3]),
         "add_m": add_error(*args, pts),
         "adds_m": adds_error(*args, pts),
+        "mssd_m": mssd_error(*args, verts, syms),
         "esa": esa_score(*args),
     }
 
 
-def summarise(errors: dict[str, list[float]], diameter: float) -> dict[str, float]:
-    """Dataset summary: mean re_deg, te_m, esa; recalls add_0.02m, add_0.1d, adds_0.1d in [0, 1]."""
+def headline_add(symmetric: bool) -> tuple[str, str]:
+    """(error key, name) of the headline ADD: ADD-S for a symmetric object, else ADD (GDR-Net's ADD(-S) on
+    LINEMOD, BOP's `ad` error)."""
+    return ("adds_m", "ADD-S") if symmetric else ("add_m", "ADD")
+
+
+def summarise(errors: dict[str, list[float]], diameter: float, symmetric: bool) -> dict[str, Any]:
+    """Dataset summary: mean re_deg, re_sym_deg, te_m, esa; recalls in [0, 1]: add_0.02m and add_0.1d of
+    the headline ADD (`add_metric`, see headline_add), adds_0.1d, mssd_0.1d, and BOP19's ar_mssd (MSSD's
+    recall averaged over MSSD_THRESHOLDS)."""
     n = len(errors["re_deg"])
+    add_key, add_name = headline_add(symmetric)
 
     def recall(key: str, thr: float) -> float:
         return sum(e < thr for e in errors[key]) / n if n else math.nan
@@ -86,9 +143,14 @@ def summarise(errors: dict[str, list[float]], diameter: float) -> dict[str, floa
     return {
         "n": n,
         "re_deg": mean("re_deg"),
+        "re_sym_deg": mean("re_sym_deg"),
         "te_m": mean("te_m"),
-        "add_0.02m": recall("add_m", 0.02),
-        "add_0.1d": recall("add_m", 0.1 * diameter),
+        "symmetric": symmetric,
+        "add_metric": add_name,
+        "add_0.02m": recall(add_key, 0.02),
+        "add_0.1d": recall(add_key, 0.1 * diameter),
         "adds_0.1d": recall("adds_m", 0.1 * diameter),
+        "mssd_0.1d": recall("mssd_m", 0.1 * diameter),
+        "ar_mssd": sum(recall("mssd_m", f * diameter) for f in MSSD_THRESHOLDS) / len(MSSD_THRESHOLDS),
         "esa": mean("esa"),
     }

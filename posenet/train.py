@@ -26,11 +26,11 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
-from posenet.config import OptimConfig, TrainConfig
+from posenet.config import OptimConfig, TrainConfig, config_from_dict
 from posenet.data import EpochSampler, PoseDataset, open_split
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
-from posenet.losses import LOSS_TERMS, pose_losses
+from posenet.losses import LOSS_TERMS, PmObject, pose_losses
 from posenet.models import PoseNet, create_model
 from scgen.atomic import atomic_write_text
 
@@ -143,21 +143,25 @@ class _Log:
         self.bar.close()
 
 
-def pm_loss_points(obj: ObjectModel, device: torch.device) -> torch.Tensor:
-    """The point-matching loss's model points, scaled by the object's largest extent, on `device`."""
-    return torch.from_numpy(obj.pm_points / obj.extent.max()).float().to(device)
+def pm_loss_points(obj: ObjectModel, device: torch.device) -> PmObject:
+    """The point-matching loss's view of the object on `device`: its model points scaled by its largest
+    extent, and its symmetries."""
+    return PmObject(
+        points=torch.from_numpy(obj.pm_points / obj.extent.max()).float().to(device),
+        symmetries=torch.from_numpy(obj.symmetries).float().to(device),
+    )
 
 
 def train_step(
     model: torch.nn.Module,
     optimizer: torch.optim.Optimizer,
     batch: dict[str, torch.Tensor],
-    pm_points: torch.Tensor,
+    pm: PmObject,
     cfg: TrainConfig,
 ) -> torch.Tensor:
     """One optimisation step; returns the detached (total, *terms) losses."""
     out = model(batch["roi_img"], batch["roi_coord2d"])
-    loss, terms = pose_losses(out, batch, pm_points, cfg.loss)
+    loss, terms = pose_losses(out, batch, pm, cfg.loss)
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
     optimizer.step()
@@ -195,7 +199,7 @@ class _Run:
     dataset: PoseDataset
     sampler: EpochSampler
     loader: DataLoader
-    pm_points: torch.Tensor
+    pm: PmObject
     device: torch.device
     world: int
     step: int  # optimisation steps done
@@ -221,7 +225,7 @@ def _set_up(
     sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
     stop = _stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, announce=rank == 0)
     model, optimizer, scheduler = _build(cfg, total, device)
-    step = _restore(out / LAST, model, optimizer, scheduler) if resume else 0
+    step = _restore(out / LAST, model, optimizer, scheduler, cfg.data.obj_id) if resume else 0
     return _Run(
         cfg=cfg,
         model=model,
@@ -230,7 +234,7 @@ def _set_up(
         scheduler=scheduler,
         dataset=dataset,
         sampler=sampler,
-        pm_points=pm_loss_points(dataset.obj, device),
+        pm=pm_loss_points(dataset.obj, device),
         loader=_loader(dataset, sampler, cfg.data.workers, device),
         device=device,
         world=world,
@@ -286,10 +290,15 @@ def _build(
     return model, optimizer, scheduler
 
 
-def _restore(path: Path, model: PoseNet, optimizer: torch.optim.Optimizer, scheduler: LambdaLR) -> int:
-    """Load a checkpoint of the same network configuration into the run; returns its step."""
+def _restore(
+    path: Path, model: PoseNet, optimizer: torch.optim.Optimizer, scheduler: LambdaLR, obj_id: int
+) -> int:
+    """Load a checkpoint of the same network configuration and object into the run; returns its step."""
     state = load_checkpoint(path)
     check_model_config(state, model.config_dict(), path)
+    trained = config_from_dict(state["config"]).data.obj_id
+    if trained != obj_id:
+        raise PosenetError(f"{path} trains object {trained}, not object {obj_id} (--obj-id)")
     model.load_state_dict(state["model"])
     optimizer.load_state_dict(state["optimizer"])
     scheduler.load_state_dict(state["scheduler"])
@@ -333,7 +342,7 @@ def _train_epoch(run: _Run, epoch: int, log: _Log | None) -> None:
     processes and logged."""
     tic = time.perf_counter()
     for batch in run.loader:
-        values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm_points, run.cfg)
+        values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm, run.cfg)
         lr = run.optimizer.param_groups[0]["lr"]
         run.scheduler.step()
         run.step += 1

@@ -26,9 +26,11 @@ BATCH_TOLERANCE = {
     "R": 1e-4,
     "t": 1e-5,
     "re_deg": 1e-2,
+    "re_sym_deg": 1e-2,
     "te_m": 1e-5,
     "add_m": 1e-5,
     "adds_m": 1e-5,
+    "mssd_m": 1e-5,
     "esa": 1e-3,
 }
 

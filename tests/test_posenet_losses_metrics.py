@@ -9,7 +9,7 @@ import torch
 
 from posenet.config import LossConfig
 from posenet.geometry import ego_to_allo, mat_to_rot6d, site_encode
-from posenet.losses import coord_loss, mask_loss, pm_loss, pose_losses, region_loss
+from posenet.losses import PmObject, coord_loss, mask_loss, pm_loss, pose_losses, region_loss
 from posenet.metrics import (
     ESA_THETA_Q_DEG,
     add_error,
@@ -64,7 +64,7 @@ def perfect_batch(b: int = 2, r: int = 8, regions: int = 4) -> tuple[dict, dict]
 def test_perfect_prediction_has_zero_loss() -> None:
     batch, out = perfect_batch()
     pts = torch.rand(100, 3) - 0.5
-    total, terms = pose_losses(out, batch, pts, LossConfig())
+    total, terms = pose_losses(out, batch, PmObject(pts, torch.eye(4)[None]), LossConfig())
     assert set(terms) == {"coord", "mask", "region", "pm", "cent", "z"}
     for name, value in terms.items():
         assert float(value) < 1e-4, name
@@ -76,7 +76,7 @@ def test_total_is_the_weighted_sum_with_the_paper_weights() -> None:
     out = {k: v + 0.1 for k, v in out.items()}
     cfg = LossConfig()
     assert (cfg.coord, cfg.mask, cfg.region, cfg.pm, cfg.cent, cfg.z) == (1.0, 1.0, 1.1, 1.0, 1.0, 1.0)
-    total, terms = pose_losses(out, batch, torch.rand(50, 3), cfg)
+    total, terms = pose_losses(out, batch, PmObject(torch.rand(50, 3), torch.eye(4)[None]), cfg)
     expected = sum(getattr(cfg, k) * v for k, v in terms.items())
     assert torch.isclose(total, expected)
     assert all(float(v) > 0 for k, v in terms.items() if k != "region")
@@ -136,8 +136,9 @@ def test_summary_keys_and_recalls() -> None:
     R = torch.eye(3, dtype=torch.float64).expand(4, 3, 3)
     t = torch.tensor([[0.0, 0.0, 2.0]], dtype=torch.float64).expand(4, 3)
     offsets = torch.tensor([[0.0, 0, 0], [0.01, 0, 0], [0.019, 0, 0], [0.05, 0, 0]], dtype=torch.float64)
-    errs = sample_errors(R, t + offsets, R, t, torch.rand(100, 3, dtype=torch.float64) - 0.5)
-    s = summarise({k: v.tolist() for k, v in errs.items()}, diameter=0.2)
+    pts = torch.rand(100, 3, dtype=torch.float64) - 0.5
+    errs = sample_errors(R, t + offsets, R, t, pts, pts, torch.eye(4, dtype=torch.float64)[None])
+    s = summarise({k: v.tolist() for k, v in errs.items()}, diameter=0.2, symmetric=False)
     assert {"re_deg", "te_m", "add_0.02m", "add_0.1d", "adds_0.1d", "esa"} <= set(s)
     assert s["add_0.02m"] == 0.75 and s["add_0.1d"] == 0.75
     assert math.isclose(s["te_m"], (0.01 + 0.019 + 0.05) / 4)

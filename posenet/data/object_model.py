@@ -1,4 +1,4 @@
-"""The target object as posenet needs it: vertices, extent, diameter, surface regions and surface points.
+"""The target object as posenet needs it: vertices, extent, diameter, symmetries, surface regions and points.
 
 Read from a dataset's BOP model files (millimetres) and converted to metres. Regions (FPS on the vertices,
 as GDR-Net) and the surface points (a fixed-seed, area-weighted sample of the faces) are deterministic, so
@@ -29,6 +29,14 @@ class ObjectModel:
     diameter: float
     fps_points: np.ndarray  # (num_regions, 3) surface-region centres, FPS on the vertices
     pm_points: np.ndarray  # (num_pm, 3) uniform surface points: the PM loss and ADD / ADD-S use them
+    # (K, 4, 4) transforms S with X_cam = R·(S·X) + t showing the same view, identity first (models_info's
+    # symmetries, continuous ones discretised: scgen.bop.symmetry_transforms); K = 1 without symmetries
+    symmetries: np.ndarray
+
+    @property
+    def symmetric(self) -> bool:
+        """Whether models_info declares any symmetry (BOP's symmetric objects)."""
+        return len(self.symmetries) > 1
 
 
 def farthest_point_sampling(points: np.ndarray, n: int) -> np.ndarray:
@@ -61,7 +69,8 @@ def load_object_model(root: Path, obj_id: int, num_regions: int, num_pm: int) ->
     try:
         info = bop.read_models_info(root)[str(obj_id)]
         extent = bop.model_size_m(info)
-    except (KeyError, TypeError) as exc:
+        symmetries = bop.symmetry_transforms(info)
+    except (KeyError, TypeError, ValueError) as exc:
         raise PosenetError(f"{info_path}: no valid entry for object {obj_id}") from exc
     mesh = bop.read_model_mesh(root, obj_id)
     vertices = np.asarray(mesh.vertices)
@@ -74,4 +83,5 @@ def load_object_model(root: Path, obj_id: int, num_regions: int, num_pm: int) ->
         diameter=float(info["diameter"]) / bop.MM_PER_M,
         fps_points=farthest_point_sampling(vertices, num_regions),
         pm_points=surface_points(mesh, num_pm),
+        symmetries=symmetries,
     )
