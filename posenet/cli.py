@@ -15,11 +15,14 @@ from posenet.bench import PAPER, device_label, format_report, resolve_device, ru
 from posenet.config import load_config
 from posenet.data.boxes import boxes_from_gt
 from posenet.data.layout import scan_split
+from posenet.detect import detect, detection_entries, detector_dataset, load_detector
+from posenet.detector import image_groups, load_detector_config
 from posenet.errors import PosenetError
 from posenet.evaluate import BATCH_SIZE, bop_results_csv, evaluate, format_table
 from posenet.evaluate import by_factor as run_by_factor
 from posenet.models import VARIANTS
 from posenet.train import train as run_train
+from posenet.train_detector import train_detector
 from posenet.viz import heatmap_panel, overlay_panel
 from scgen.atomic import atomic_write_text
 from scgen.cli_errors import one_line_errors
@@ -166,6 +169,8 @@ def eval_cmd(
         ["ESA score", f"{s['esa']:.4f}"],
         ["latency, batch 1 (ms)", f"{s['latency_ms']:.2f}"],
     ]
+    rows.insert(1, ["missed (no detection: failures)", f"{s['missed']}"])
+    click.echo(f"boxes: {s['boxes']}")
     click.echo(format_table([f"{result.variant} on {split}", "value"], rows))
     if predictions is None:
         predictions = (
@@ -184,20 +189,54 @@ def eval_cmd(
         click.echo(f"BOP results: {bop_csv}")
 
 
+@main.command("train-detector")
+@click.option("--data", type=PATH, required=True, help="Dataset folder (train split trained, val selects).")
+@click.option("--out", type=PATH, required=True, help="Run folder: config.yaml, last.pt, best.pt, tb/.")
+@click.option(
+    "--config", "config", default=None, help="cpu (alias smoke) | paper | a YAML/TOML file  [default: cpu]"
+)
+@click.option("--max-steps", type=click.IntRange(min=1), default=None, help="Stop after N steps.")
+@click.option("--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config).")
+@click.option("--obj-id", type=click.IntRange(min=1), default=None, help="Object to detect [default: 1].")
+@one_line_errors(PosenetError, ScgenError)
+def train_detector_cmd(
+    data: Path, out: Path, config: str | None, max_steps: int | None, resume: bool, obj_id: int | None
+) -> None:
+    """Train the single-class target detector (FCOS, random init) on the visible boxes (bbox_visib)."""
+    if config is None:
+        saved = out / "config.yaml"
+        config = str(saved) if resume and saved.is_file() else "cpu"
+    cfg = load_detector_config(config, obj_id)
+    click.echo(f"checkpoint: {train_detector(data, out, cfg, resume=resume, max_steps=max_steps)}")
+
+
 @main.command()
 @click.option("--data", type=PATH, required=True, help="Dataset folder.")
 @click.option("--out", type=PATH, required=True, help="Box file to write (BOP detection JSON).")
 @click.option("--split", default="test", show_default=True)
+@click.option("--detector", type=PATH, default=None, help="Detector checkpoint; default: GT boxes.")
 @click.option("--noise", type=click.FloatRange(min=0), default=0.0, show_default=True,
               help="Relative std of centre shift and log size change (0: exact GT boxes).")  # fmt: skip
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--obj-id", type=click.IntRange(min=1), default=1, show_default=True, help="Object to box.")
 @one_line_errors(PosenetError, ScgenError)
-def boxes(data: Path, out: Path, split: str, noise: float, seed: int, obj_id: int) -> None:
-    """Write one box per image of a split from the GT full-object boxes, optionally perturbed."""
-    entries = boxes_from_gt([i for i in scan_split(data, split, obj_id) if i.px_count_visib > 0], noise, seed)
+def boxes(
+    data: Path, out: Path, split: str, detector: Path | None, noise: float, seed: int, obj_id: int
+) -> None:
+    """Write one box per image of a split: the detector's (misses recorded), else the GT full-object boxes,
+    optionally perturbed."""
+    if detector is None:
+        insts = [i for i in scan_split(data, split, obj_id) if i.px_count_visib > 0]
+        entries = boxes_from_gt(insts, noise, seed)
+        label = "ground-truth"
+    else:
+        device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+        model, state = load_detector(detector, device)
+        dets = detect(model, detector_dataset(state, image_groups(data, split, obj_id)), device)
+        entries = detection_entries(dets, obj_id, f"detector:{detector}")
+        label = f"detector ({sum(d.box is None for d in dets)} misses)"
     atomic_write_text(out, json.dumps(entries) + "\n")
-    click.echo(f"{len(entries)} boxes -> {out}")
+    click.echo(f"{len(entries)} {label} boxes -> {out}")
 
 
 @main.command("bench")

@@ -96,7 +96,7 @@ class TrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON/YAML-able; `resolved_model` (every ModelConfig field) is informational, ignored on load."""
-        d = {k: _plain(v) for k, v in dataclasses.asdict(self).items()}
+        d = {k: plain(v) for k, v in dataclasses.asdict(self).items()}
         d["resolved_model"] = self.model_config().to_dict()
         return d
 
@@ -104,10 +104,10 @@ class TrainConfig:
         return yaml.safe_dump(self.to_dict(), sort_keys=False)
 
 
-def _plain(value: Any) -> Any:
+def plain(value: Any) -> Any:
     """Tuples as lists, recursively: what YAML and JSON write and read back."""
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: plain(v) for k, v in value.items()}
     return list(value) if isinstance(value, tuple) else value
 
 
@@ -126,7 +126,7 @@ def load_config(
     name_or_path: str, variant: str | None = None, epochs: int | None = None, obj_id: int | None = None
 ) -> TrainConfig:
     """A preset name or a YAML/TOML file, then the command-line overrides; validated."""
-    raw = {"preset": name_or_path} if name_or_path in PRESETS else _read_file(Path(name_or_path))
+    raw = {"preset": name_or_path} if name_or_path in PRESETS else read_config_file(Path(name_or_path))
     cfg = config_from_dict(raw)
     if variant is not None:
         cfg.variant = variant
@@ -146,7 +146,7 @@ def config_from_dict(raw: dict[str, Any]) -> TrainConfig:
     cfg = smoke_config() if preset == "smoke" else TrainConfig(preset=preset)
     for key, value in raw.items():
         if key in ("data", "loss", "optim"):
-            setattr(cfg, key, _override(getattr(cfg, key), value, key))
+            setattr(cfg, key, override_fields(getattr(cfg, key), value, key))
         elif key == "model":
             if not isinstance(value, dict):
                 raise PosenetError("config 'model' must be a table")
@@ -159,7 +159,7 @@ def config_from_dict(raw: dict[str, Any]) -> TrainConfig:
     return cfg
 
 
-def _read_file(path: Path) -> dict[str, Any]:
+def read_config_file(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise PosenetError(f"config {str(path)!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
     try:
@@ -172,7 +172,7 @@ def _read_file(path: Path) -> dict[str, Any]:
     return data
 
 
-def _override(section: Any, values: Any, name: str) -> Any:
+def override_fields(section: Any, values: Any, name: str) -> Any:
     if not isinstance(values, dict):
         raise PosenetError(f"config '{name}' must be a table")
     fields = {f.name: f for f in dataclasses.fields(section)}

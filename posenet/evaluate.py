@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +24,7 @@ from posenet.bench import dummy_inputs, measure_latency_ms
 from posenet.checkpoint import load_checkpoint
 from posenet.config import config_from_dict
 from posenet.data import open_split
+from posenet.data.boxes import box_source, read_misses
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose
@@ -95,6 +97,26 @@ def per_image_times(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{**r, "time_s": total[r["scene_id"], r["im_id"]]} for r in records]
 
 
+def fail_misses(
+    records: list[dict[str, Any]], keys: list[str], misses: set[tuple[int, int]]
+) -> tuple[list[dict[str, Any]], dict[str, list[float]]]:
+    """The records with those of missed images (no detection) made failures: no pose, every error
+    infinite (so below no threshold and every mean infinite), `missed` true; and the errors' lists."""
+    out = []
+    for r in records:
+        if (r["scene_id"], r["im_id"]) in misses:
+            r = {**r, "R": None, "t": None, "missed": True} | {k: math.inf for k in keys}
+        out.append(r)
+    return out, {k: [r[k] for r in out] for k in keys}
+
+
+def box_description(boxes: Path | None) -> str:
+    """Which boxes an evaluation used: the file and what it holds (see boxes.box_source), or GT."""
+    if boxes is None:
+        return "ground truth (each instance's bbox_obj)"
+    return f"{boxes} ({box_source(boxes)})"
+
+
 def evaluate(
     data: Path,
     ckpt: Path,
@@ -122,9 +144,16 @@ def evaluate(
     )
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, num_workers=workers)
     records, errors = predict(model, loader, dataset.obj, device)
+    if boxes is not None:
+        records, errors = fail_misses(records, list(errors), read_misses(boxes, data_cfg.obj_id))
     latency = measure_latency_ms(model, dummy_inputs(model.config, device), LATENCY_WARMUP, LATENCY_ITERS)
     summary = summarise(errors, dataset.obj.diameter, dataset.obj.symmetric)
-    summary |= {"latency_ms": latency, "fps": 1000 / latency}
+    summary |= {
+        "latency_ms": latency,
+        "fps": 1000 / latency,
+        "missed": sum(r.get("missed", False) for r in records),
+        "boxes": box_description(boxes),
+    }
     return EvalResult(state["model_config"]["variant"], summary, records)
 
 
@@ -133,7 +162,7 @@ def bop_results_csv(records: list[dict[str, Any]]) -> str:
     mm, space-separated; time = the image's seconds (the same for each of its estimates); score 1.0 (the
     network gives no confidence)."""
     lines = ["scene_id,im_id,obj_id,score,R,t,time"]
-    for r in records:
+    for r in (r for r in records if not r.get("missed")):  # no estimate: BOP counts it wrong
         R = " ".join(repr(float(v)) for v in r["R"])
         t = " ".join(repr(float(v) * bop.MM_PER_M) for v in r["t"])
         lines.append(f"{r['scene_id']},{r['im_id']},{r['obj_id']},1.0,{R},{t},{r['time_s']!r}")

@@ -109,7 +109,7 @@ def _to(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch
     return {k: v.to(device, non_blocking=True) for k, v in batch.items()}
 
 
-class _Log:
+class RunLog:
     """Rank 0's step log (JSONL), TensorBoard scalars and progress bar."""
 
     def __init__(self, out: Path, step: int, total: int, every: int) -> None:
@@ -223,7 +223,7 @@ def _set_up(
     dataset = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
     total = o.epochs * steps_per_epoch(len(dataset), o, world)
     sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
-    stop = _stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, announce=rank == 0)
+    stop = stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, announce=rank == 0)
     model, optimizer, scheduler = _build(cfg, total, device)
     step = _restore(out / LAST, model, optimizer, scheduler, cfg.data.obj_id) if resume else 0
     return _Run(
@@ -264,7 +264,7 @@ def _loader(dataset: PoseDataset, sampler: EpochSampler, workers: int, device: t
     )
 
 
-def _stop_step(total: int, max_steps: int | None, epochs: int, per_epoch: int, announce: bool) -> int:
+def stop_step(total: int, max_steps: int | None, epochs: int, per_epoch: int, announce: bool) -> int:
     """The step to stop at: the schedule's end, or --max-steps before it (a cap past it is announced)."""
     if max_steps is None:
         return total
@@ -319,14 +319,14 @@ def _checkpoint(run: _Run) -> dict[str, Any]:
     }
 
 
-def _open_run_folder(out: Path, cfg: TrainConfig, step: int, stop: int) -> _Log:
+def _open_run_folder(out: Path, cfg: TrainConfig, step: int, stop: int) -> RunLog:
     """Rank 0: create OUT, write the resolved config.yaml and open the step log from `step`."""
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "config.yaml", cfg.to_yaml())
-    return _Log(out, step, stop, cfg.optim.log_every)
+    return RunLog(out, step, stop, cfg.optim.log_every)
 
 
-def _loop(run: _Run, ckpt: Path | None, log: _Log | None) -> None:
+def _loop(run: _Run, ckpt: Path | None, log: RunLog | None) -> None:
     """Epochs until the stop step; with `ckpt` (rank 0), save it every ckpt_every epochs and at the stop."""
     run.model.train()
     while run.step < run.stop:
@@ -337,7 +337,7 @@ def _loop(run: _Run, ckpt: Path | None, log: _Log | None) -> None:
             save_checkpoint(ckpt, _checkpoint(run))
 
 
-def _train_epoch(run: _Run, epoch: int, log: _Log | None) -> None:
+def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
     """The sampler's batches of `epoch` up to the stop step: one step each, losses averaged over the
     processes and logged."""
     tic = time.perf_counter()

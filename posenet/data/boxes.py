@@ -2,7 +2,9 @@
 
 The file is BOP's detection format (docs/posenet.md): a JSON list of
 {"scene_id", "image_id", "category_id", "bbox": [x, y, w, h] (pixels), "score", "time"}. Where an image
-has several entries for the object, the highest score wins.
+has several entries for the object, the highest score wins. posenet adds two things BOP readers ignore or
+skip: a "source" field per entry (`gt`, `gt+noise`, `detector`) and misses, entries with "bbox": [] and
+"score": 0, for images where the detector found nothing; evaluation counts those as failures.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from posenet.data.layout import Instance
 from posenet.errors import PosenetError
 
 Box = tuple[float, float, float, float]
+# The crop a missed image is still read with, so the loader needs no special case; its estimate is discarded
+MISS_PLACEHOLDER: Box = (0.0, 0.0, 1.0, 1.0)
 
 
 def boxes_from_gt(instances: list[Instance], noise: float = 0.0, seed: int = 0) -> list[dict]:
@@ -43,21 +47,36 @@ def boxes_from_gt(instances: list[Instance], noise: float = 0.0, seed: int = 0) 
                 "bbox": [round(v, 2) for v in (x, y, w, h)],
                 "score": 1.0,
                 "time": 0.0,
+                "source": "gt+noise" if noise > 0 else "gt",
             }
         )
     return out
 
 
-def read_boxes(path: Path, obj_id: int) -> dict[tuple[int, int], Box]:
-    """{(scene_id, image_id): best-scoring box of `obj_id`} from a detection file."""
+def miss_entry(scene_id: int, image_id: int, obj_id: int, time_s: float, source: str) -> dict:
+    """The entry of an image where the detector found nothing: no box, score 0."""
+    return {"scene_id": scene_id, "image_id": image_id, "category_id": obj_id, "bbox": [], "score": 0.0,
+            "time": time_s, "source": source}  # fmt: skip
+
+
+def _entries(path: Path) -> list[dict]:
     try:
-        entries = json.loads(Path(path).read_text())
+        return json.loads(Path(path).read_text())
     except (OSError, json.JSONDecodeError) as exc:
         raise PosenetError(f"cannot read box file {path}: {exc}") from exc
+
+
+def read_boxes(path: Path, obj_id: int) -> dict[tuple[int, int], Box]:
+    """{(scene_id, image_id): best-scoring box of `obj_id`} from a detection file; an image with only
+    misses maps to MISS_PLACEHOLDER (see read_misses)."""
+    entries = _entries(path)
     best: dict[tuple[int, int], tuple[float, Box]] = {}
     try:
         for e in entries:
             if int(e["category_id"]) != obj_id:
+                continue
+            if not e["bbox"]:
+                best.setdefault((int(e["scene_id"]), int(e["image_id"])), (-math.inf, MISS_PLACEHOLDER))
                 continue
             box = tuple(float(v) for v in e["bbox"])
             if len(box) != 4 or box[2] <= 0 or box[3] <= 0:
@@ -68,3 +87,16 @@ def read_boxes(path: Path, obj_id: int) -> dict[tuple[int, int], Box]:
     except (TypeError, KeyError, ValueError) as exc:
         raise PosenetError(f"box file {path} is not a BOP detection list: {exc}") from exc
     return {k: box for k, (_, box) in best.items()}
+
+
+def read_misses(path: Path, obj_id: int) -> set[tuple[int, int]]:
+    """The (scene_id, image_id) of `obj_id` with a miss entry and no box in a detection file."""
+    entries = [e for e in _entries(path) if int(e["category_id"]) == obj_id]
+    found = {(int(e["scene_id"]), int(e["image_id"])) for e in entries if e["bbox"]}
+    return {(int(e["scene_id"]), int(e["image_id"])) for e in entries if not e["bbox"]} - found
+
+
+def box_source(path: Path) -> str:
+    """What a box file holds, from its entries' "source" fields: e.g. `detector`, `gt`, or `unknown`
+    (a file without them, such as BOP's default detections)."""
+    return "+".join(sorted({str(e.get("source", "unknown")) for e in _entries(path)})) or "empty"

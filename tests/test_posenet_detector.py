@@ -1,0 +1,137 @@
+"""The detector and its box files end to end on a rendered dataset: learning, stored boxes, misses."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+from posenet_helpers import posenet_dataset
+
+from posenet.cli import main
+from posenet.detect import Detection, box_metrics, detect, detector_dataset, load_detector
+from posenet.detector import build_detector, image_groups, visible_boxes
+from posenet.evaluate import evaluate
+from posenet.metrics import headline_add
+
+# the cpu preset as a user gets it, on one thread (the machine is shared; same losses every run)
+DETECTOR = "preset: cpu\noptim: {threads: 1}\n"
+POSE = """\
+preset: smoke
+model: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, fc_dims: [64, 32]}
+data: {workers: 0}
+optim: {batch_size: 4, epochs: 1}
+"""
+
+
+def _invoke(*args: object) -> str:
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    assert res.exit_code == 0, res.output
+    return res.output
+
+
+@pytest.fixture(scope="module")
+def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return posenet_dataset(tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def detector_run(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("detector")
+    (root / "cpu.yaml").write_text(DETECTOR)
+    _invoke("train-detector", "--data", dataset_dir, "--out", root / "run", "--config", root / "cpu.yaml")
+    return root / "run"
+
+
+@pytest.fixture(scope="module")
+def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("pose")
+    (root / "tiny.yaml").write_text(POSE)
+    _invoke(
+        "train",
+        "--data",
+        dataset_dir,
+        "--out",
+        root / "run",
+        "--config",
+        root / "tiny.yaml",
+        "--max-steps",
+        2,
+    )
+    return root / "run" / "last.pt"
+
+
+def test_detector_learns_visible_boxes(dataset_dir: Path, detector_run: Path) -> None:
+    """Mean IoU with bbox_visib on the training images: trained well above an untrained network and
+    above the best fixed box (the mean training box)."""
+    cpu = torch.device("cpu")
+    images = image_groups(dataset_dir, "train", 1)
+    gt = [visible_boxes(i) for i in images]
+    model, state = load_detector(detector_run / "last.pt", cpu)
+    trained = box_metrics(detect(model, detector_dataset(state, images), cpu), gt)
+    torch.manual_seed(0)
+    untrained = box_metrics(
+        detect(build_detector(state["model_config"]), detector_dataset(state, images), cpu), gt
+    )
+    mean_box = tuple(float(v) for v in np.concatenate(gt).mean(0))
+    fixed = box_metrics([Detection(i[0].key, mean_box, 1.0, 0.0) for i in images], gt)
+    print(f"mean IoU: trained {trained['mean_iou']:.3f}, untrained {untrained['mean_iou']:.3f}, "
+          f"fixed box {fixed['mean_iou']:.3f}")  # fmt: skip
+    assert trained["mean_iou"] >= 2 * untrained["mean_iou"]
+    assert trained["mean_iou"] >= 1.5 * fixed["mean_iou"]
+    assert (detector_run / "best.pt").is_file() and (detector_run / "tb").is_dir()
+
+
+def test_stored_detector_boxes_reused_byte_for_byte(
+    dataset_dir: Path, detector_run: Path, pose_ckpt: Path, tmp_path: Path
+) -> None:
+    boxes = tmp_path / "boxes.json"
+    out = _invoke("boxes", "--data", dataset_dir, "--split", "test", "--detector", detector_run / "last.pt",
+                  "--out", boxes)  # fmt: skip
+    assert "detector" in out
+    entries = json.loads(boxes.read_text())
+    assert all(e["source"].startswith("detector") for e in entries)
+    before = boxes.read_bytes()
+    runs = []
+    for name in ("a", "b"):
+        printed = _invoke("eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--boxes", boxes,
+                          "--json", tmp_path / f"{name}.json", "--workers", 0)  # fmt: skip
+        assert f"boxes: {boxes} (detector:" in printed
+        runs.append(json.loads((tmp_path / f"{name}.json").read_text()))
+    assert boxes.read_bytes() == before
+    for r in runs:
+        r.pop("latency_ms"), r.pop("fps")
+    assert runs[0] == runs[1]
+    preds = [(tmp_path / f"{n}.predictions.jsonl").read_text() for n in "ab"]
+    strip = [
+        [{k: v for k, v in json.loads(ln).items() if k != "time_s"} for ln in p.splitlines()] for p in preds
+    ]
+    assert strip[0] == strip[1]
+
+
+def test_miss_is_a_failure_for_every_metric(dataset_dir: Path, pose_ckpt: Path, tmp_path: Path) -> None:
+    boxes = tmp_path / "gt.json"
+    assert "ground-truth" in _invoke("boxes", "--data", dataset_dir, "--out", boxes)
+    entries = json.loads(boxes.read_text())
+    missed = entries[0]
+    entries[0] = {**missed, "bbox": [], "score": 0.0, "source": "detector:test"}
+    with_miss = tmp_path / "miss.json"
+    with_miss.write_text(json.dumps(entries))
+    full = evaluate(dataset_dir, pose_ckpt, boxes=boxes, workers=0)
+    res = evaluate(dataset_dir, pose_ckpt, boxes=with_miss, workers=0)
+    assert res.summary["n"] == full.summary["n"] and res.summary["missed"] == 1
+    key = (missed["scene_id"], missed["image_id"])
+    rec = next(r for r in res.records if (r["scene_id"], r["im_id"]) == key)
+    assert rec["missed"] and rec["R"] is None
+    assert all(rec[k] == math.inf for k in ("re_deg", "te_m", "add_m", "adds_m", "mssd_m", "esa"))
+    key_add, _ = headline_add(res.summary["symmetric"])
+    others = [r for r in full.records if (r["scene_id"], r["im_id"]) != key]
+    assert res.summary["add_0.02m"] == pytest.approx(
+        sum(r[key_add] < 0.02 for r in others) / len(full.records)
+    )
+    assert res.summary["re_deg"] == math.inf and res.summary["esa"] == math.inf
+    assert "ground truth" in evaluate(dataset_dir, pose_ckpt, workers=0).summary["boxes"]
