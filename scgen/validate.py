@@ -191,14 +191,13 @@ def check_gt_info(
     """scene_gt_info in bop_toolkit's conventions: BOP boxes (w = max - min, -1 when nothing is visible),
     px_count_all and bbox_obj of the whole projection (`whole`, recomputed from the model), px_count_valid
     = mask pixels with a depth value (`valid`), visib_fract = px_count_visib / px_count_all."""
-    ys, xs = np.nonzero(visib)
-    px_all, bbox_obj = whole
-    expected = {"bbox_obj": bbox_obj if len(xs) else list(bop.EMPTY_BOX), "bbox_visib": bop.bbox(xs, ys),
-                "px_count_all": px_all, "px_count_valid": valid, "px_count_visib": len(xs)}  # fmt: skip
+    expected = bop.gt_info_entry(*whole, visib, valid, info["xyz_box"])
     out = [
-        f"{k} {info[k]} != {v} (from the masks and the model)" for k, v in expected.items() if info[k] != v
+        f"{k} {info[k]} != {v} (from the masks and the model)"
+        for k, v in expected.items()
+        if k not in ("visib_fract", "xyz_box") and info[k] != v
     ]
-    if not np.isclose(info["visib_fract"], len(xs) / px_all if px_all else 0.0):
+    if not np.isclose(info["visib_fract"], expected["visib_fract"]):
         out.append(f"visib_fract {info['visib_fract']} != px_count_visib / px_count_all")
     return out
 
