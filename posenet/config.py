@@ -181,6 +181,11 @@ def override_fields(section: Any, values: Any, name: str) -> Any:
         if key not in fields:
             raise PosenetError(f"unknown config key '{name}.{key}'")
         default = getattr(section, key)
+        if default is None:  # an optional path (e.g. a weights file): a string or null
+            if value is not None and not isinstance(value, str):
+                raise PosenetError(f"config '{name}.{key}' must be a path or null, got {value!r}")
+            out[key] = value
+            continue
         if isinstance(default, tuple):
             if not isinstance(value, (list, tuple)) or len(value) != len(default):
                 raise PosenetError(f"config '{name}.{key}' must be a list of {len(default)} numbers")

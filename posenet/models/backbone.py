@@ -1,4 +1,4 @@
-"""timm backbones as stride-32 feature extractors, randomly initialised or from a local state dict."""
+"""timm backbones as feature extractors, randomly initialised or from a local state dict."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from torch import Tensor, nn
 from posenet.errors import PosenetError
 
 
-def _checked_weights(name: str, path: str) -> dict[str, Tensor]:
+def checked_weights(name: str, path: str) -> dict[str, Tensor]:
     """Load a classifier checkpoint of `name` (timm or torchvision keys; the classifier may be absent).
 
     The check is strict apart from the classifier: a file for another architecture is refused rather
@@ -39,11 +39,31 @@ def open_residual_init(name: str) -> dict[str, object]:
     ~20 px receptive field at stride 32. Measured here: after 780 CPU steps the ResNet gammas were still
     ~0.01, the branches never opened, and xyz, regions and pose did not learn (docs/posenet.md).
     """
-    if name.startswith("resnet"):
+    if name.startswith(("resnet", "regnet")):
         return {"zero_init_last": False}
     if name.startswith("convnext"):
         return {"ls_init_value": 1.0}
     return {}
+
+
+def timm_features(name: str, weights: str | None, out_indices: tuple[int, ...]) -> nn.Module:
+    """timm's features-only `name` returning the maps of `out_indices`: from the local classifier state
+    dict `weights` (checked strictly), or from random init with the residual branches open."""
+    overlay = {"state_dict": checked_weights(name, weights)} if weights else None
+    body = timm.create_model(
+        name,
+        pretrained=overlay is not None,
+        pretrained_cfg_overlay=overlay,
+        features_only=True,
+        out_indices=out_indices,
+        **(open_residual_init(name) if overlay is None else {}),
+    )
+    if overlay is None and isinstance(getattr(body, "stem_1", None), nn.LayerNorm | LayerNorm2d):
+        # From scratch timm zeroes the ConvNeXt stem bias: a flat patch (black space) then gives equal
+        # channels, LayerNorm divides by sqrt(eps) and the bias gradient explodes. A small random bias
+        # keeps the channels apart; pretrained weights are left untouched.
+        nn.init.normal_(body.stem_0.bias, std=0.02)
+    return body
 
 
 class Backbone(nn.Module):
@@ -51,21 +71,8 @@ class Backbone(nn.Module):
 
     def __init__(self, name: str, weights: str | None = None) -> None:
         super().__init__()
-        overlay = {"state_dict": _checked_weights(name, weights)} if weights else None
-        self.body = timm.create_model(
-            name,
-            pretrained=overlay is not None,
-            pretrained_cfg_overlay=overlay,
-            features_only=True,
-            out_indices=(-1,),
-            **(open_residual_init(name) if overlay is None else {}),
-        )
+        self.body = timm_features(name, weights, (-1,))
         self.out_channels: int = self.body.feature_info.channels()[-1]
-        if overlay is None and isinstance(getattr(self.body, "stem_1", None), nn.LayerNorm | LayerNorm2d):
-            # From scratch timm zeroes the ConvNeXt stem bias: a flat patch (black space) then gives equal
-            # channels, LayerNorm divides by sqrt(eps) and the bias gradient explodes. A small random bias
-            # keeps the channels apart; pretrained weights are left untouched.
-            nn.init.normal_(self.body.stem_0.bias, std=0.02)
 
     def forward(self, x: Tensor) -> Tensor:
         return self.body(x)[-1]
