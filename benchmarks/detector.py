@@ -1,26 +1,34 @@
-"""Detector benchmark: train a preset on a dataset, then AP50, mean IoU and misses per factor group on test.
+"""Detector benchmark: train a preset, score its boxes per factor group, and pose with detected vs GT boxes.
 
     python benchmarks/detector.py --data DIR --out RUN [--config cpu] [--max-steps N] [--groups-n 50]
+                                  [--pose-ckpt POSE/last.pt]
 
 Trains `posenet train-detector`'s loop into RUN (resumes when RUN/last.pt exists), then scores
 RUN/best.pt (RUN/last.pt without a val split) against `bbox_visib` on the whole test split and on each
-factor group of `scgen.stats.sample_groups` (occlusion, distance, background), and times the detector at
-batch 1 (median per-image forward over the test split, current device).
+factor group of `scgen.stats.sample_groups` (occlusion, distance, background), times the detector at
+batch 1 (median per-image forward over the test split, current device) and writes the test split's box
+file RUN/boxes_test.json, as `posenet boxes --detector` does. With --pose-ckpt, the pose checkpoint is
+evaluated on the test split twice in this run, on ground-truth boxes and on that box file, side by side,
+overall and per factor group (a missed image fails every recall).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 from pathlib import Path
 
+import numpy as np
 import torch
 
-from posenet.detect import box_metrics, detect, detector_dataset, load_detector
+from posenet.detect import box_metrics, detect, detection_entries, detector_dataset, load_detector
 from posenet.detector import image_groups, load_detector_config, visible_boxes
-from posenet.evaluate import format_table
+from posenet.evaluate import EvalResult, evaluate, format_table
+from posenet.metrics import headline_add
 from posenet.train import LAST
 from posenet.train_detector import BEST, train_detector
+from scgen.atomic import atomic_write_text
 from scgen.stats import sample_groups
 
 
@@ -32,7 +40,32 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--max-steps", type=int, default=None, help="Stop training after N steps.")
     p.add_argument("--groups-n", type=int, default=50, help="Samples per factor group.")
     p.add_argument("--groups-seed", type=int, default=0)
+    p.add_argument("--pose-ckpt", type=Path, default=None, help="Pose checkpoint to evaluate on both boxes.")
     return p.parse_args()
+
+
+def group_rows(groups: dict[str, dict[str, list[int]]]) -> list[tuple[str, set[int] | None]]:
+    """('all', None), then ('factor/group', its sample ids) for every group (scgen: im_id = sample_id)."""
+    return [("all", None)] + [(f"{f}/{g}", set(ids)) for f, gs in groups.items() for g, ids in gs.items()]
+
+
+def pose_side_by_side(gt: EvalResult, det: EvalResult, groups: dict[str, dict[str, list[int]]]) -> str:
+    """Per group: the headline ADD@0.02 m and the median translation error on GT and on detected boxes."""
+    key, name = headline_add(gt.summary["symmetric"])
+    rows = []
+    for label, members in group_rows(groups):
+        keep = [i for i, r in enumerate(gt.records) if members is None or r["im_id"] in members]
+        if not keep:
+            continue
+        on_gt, on_det = ([res.records[i] for i in keep] for res in (gt, det))
+        add_gt, add_det = (100 * float(np.mean([r[key] < 0.02 for r in rs])) for rs in (on_gt, on_det))
+        te_gt, te_det = (statistics.median(r["te_m"] for r in rs) for rs in (on_gt, on_det))
+        missed = sum(r.get("missed", False) for r in on_det)
+        rows.append([label, str(len(keep)), f"{add_gt:.1f}", f"{add_det:.1f}", f"{add_det - add_gt:+.1f}",
+                     f"{te_gt:.3f}", f"{te_det:.3f}", str(missed)])  # fmt: skip
+    header = ["test group", "n", f"{name}@2cm GT", f"{name}@2cm det", "gap (pp)", "te med GT (m)",
+              "te med det (m)", "missed"]  # fmt: skip
+    return format_table(header, rows)
 
 
 def main() -> None:
@@ -48,15 +81,26 @@ def main() -> None:
     gt = {d.key: visible_boxes(i) for d, i in zip(dets, images, strict=True)}
     groups = sample_groups(args.data, "test", args.groups_n, args.groups_seed)["groups"]
     rows = []
-    for name, members in [("all", None)] + [
-        (f"{f}/{g}", set(ids)) for f, gs in groups.items() for g, ids in gs.items()
-    ]:
-        sel = [d for d in dets if members is None or d.key[1] in members]  # scgen: im_id = sample_id
+    for name, members in group_rows(groups):
+        sel = [d for d in dets if members is None or d.key[1] in members]
         m = box_metrics(sel, [gt[d.key] for d in sel])
         rows.append([name, str(m["n"]), f"{100 * m['ap50']:.1f}", f"{m['mean_iou']:.3f}", str(m["misses"])])
     print(f"checkpoint: {ckpt} (step {state['step']})")
     print(format_table(["test group", "n", "AP50 (%)", "mean IoU", "misses"], rows))
     print(f"latency, batch 1 ({device.type}): {1000 * statistics.median(d.time_s for d in dets):.2f} ms")
+    boxes = args.out / "boxes_test.json"
+    atomic_write_text(boxes, json.dumps(detection_entries(dets, cfg.obj_id, f"detector:{ckpt}")) + "\n")
+    print(f"wrote {boxes}")
+    if args.pose_ckpt is not None:
+        on_gt = evaluate(args.data, args.pose_ckpt, "test", workers=0)
+        on_det = evaluate(args.data, args.pose_ckpt, "test", boxes=boxes, workers=0)
+        print(f"\npose: {args.pose_ckpt}, test split, ground-truth boxes vs {boxes}")
+        summary_rows = [
+            [k, f"{on_gt.summary[k]:.4g}", f"{on_det.summary[k]:.4g}"]
+            for k in ("re_deg", "te_m", "add_0.02m", "add_0.1d", "esa", "missed")
+        ]
+        print(format_table(["metric", "GT boxes", "detected boxes"], summary_rows))
+        print(pose_side_by_side(on_gt, on_det, groups))
 
 
 if __name__ == "__main__":

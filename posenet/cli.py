@@ -18,7 +18,7 @@ from posenet.data.layout import scan_split
 from posenet.detect import detect, detection_entries, detector_dataset, load_detector
 from posenet.detector import image_groups, load_detector_config
 from posenet.errors import PosenetError
-from posenet.evaluate import BATCH_SIZE, bop_results_csv, evaluate, format_table
+from posenet.evaluate import BATCH_SIZE, bop_results_csv, evaluate, format_table, json_record
 from posenet.evaluate import by_factor as run_by_factor
 from posenet.models import VARIANTS
 from posenet.train import train as run_train
@@ -33,6 +33,29 @@ PATH = click.Path(path_type=Path)
 
 def _percent(value: float | None) -> str:
     return "-" if value is None else f"{100 * value:.2f}"
+
+
+def _by_factor_table(res: dict) -> str:
+    """`evaluate.by_factor`'s result as a table: a column per variant, and with a box file each one's gap
+    to the same on ground-truth boxes."""
+    cols, gt = res["columns"], res.get("groups_gt_boxes")
+    header = [f"{res['add_metric']}@0.02m (%)", "n"]
+    header += [h for c in cols for h in ((c, f"{c} vs GT boxes (pp)") if gt else (c,))]
+    rows = []
+    for factor, groups in res["groups"].items():
+        for group, vals in groups.items():
+            row = [f"{factor}/{group}", str(res["n"][factor][group])]
+            for c in cols:
+                row.append(_percent(vals[c]))
+                if gt:
+                    row.append(_gap(vals[c], gt[factor][group][c]))
+            rows.append(row)
+    return format_table(header, rows)
+
+
+def _gap(value: float | None, on_gt: float | None) -> str:
+    """The gap in percentage points of a figure on detected boxes to the same on GT boxes."""
+    return "-" if value is None or on_gt is None else f"{100 * (value - on_gt):+.2f}"
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -141,13 +164,8 @@ def eval_cmd(
         if bop_csv is not None:
             raise PosenetError("--bop-csv writes the estimates of one checkpoint, not a --by-factor table")
         res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers, batch_size, obj_id)
-        cols = res["columns"]
-        rows = [
-            [f"{factor}/{group}", str(res["n"][factor][group]), *(_percent(vals[c]) for c in cols)]
-            for factor, groups in res["groups"].items()
-            for group, vals in groups.items()
-        ]
-        click.echo(format_table([f"{res['add_metric']}@0.02m (%)", "n", *cols], rows))
+        click.echo(f"boxes: {res['boxes']}")
+        click.echo(_by_factor_table(res))
         if json_path is not None:
             atomic_write_text(json_path, json.dumps(res, indent=2) + "\n")
         return
@@ -169,7 +187,7 @@ def eval_cmd(
         ["ESA score", f"{s['esa']:.4f}"],
         ["latency, batch 1 (ms)", f"{s['latency_ms']:.2f}"],
     ]
-    rows.insert(1, ["missed (no detection: failures)", f"{s['missed']}"])
+    rows.insert(1, ["missed (no detection: failures; errors are means over the rest)", f"{s['missed']}"])
     click.echo(f"boxes: {s['boxes']}")
     click.echo(format_table([f"{result.variant} on {split}", "value"], rows))
     if predictions is None:
@@ -178,7 +196,7 @@ def eval_cmd(
             if json_path
             else ckpt[0].with_name(f"predictions_{split}.jsonl")
         )
-    atomic_write_text(predictions, "".join(json.dumps(r) + "\n" for r in result.records))
+    atomic_write_text(predictions, "".join(json.dumps(json_record(r)) + "\n" for r in result.records))
     if json_path is not None:
         atomic_write_text(
             json_path, json.dumps({"variant": result.variant, "split": split, **s}, indent=2) + "\n"
@@ -202,7 +220,8 @@ def eval_cmd(
 def train_detector_cmd(
     data: Path, out: Path, config: str | None, max_steps: int | None, resume: bool, obj_id: int | None
 ) -> None:
-    """Train the single-class target detector (FCOS, random init) on the visible boxes (bbox_visib)."""
+    """Train the single-class target detector (FCOS; random init or `weights:` a local backbone file) on the
+    visible boxes (bbox_visib)."""
     if config is None:
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "cpu"

@@ -101,13 +101,19 @@ def fail_misses(
     records: list[dict[str, Any]], keys: list[str], misses: set[tuple[int, int]]
 ) -> tuple[list[dict[str, Any]], dict[str, list[float]]]:
     """The records with those of missed images (no detection) made failures: no pose, every error
-    infinite (so below no threshold and every mean infinite), `missed` true; and the errors' lists."""
+    infinite (so below no threshold; `summarise` leaves them out of the means), `missed` true; and the
+    errors' lists. `json_record` writes those errors as null."""
     out = []
     for r in records:
         if (r["scene_id"], r["im_id"]) in misses:
             r = {**r, "R": None, "t": None, "missed": True} | {k: math.inf for k in keys}
         out.append(r)
     return out, {k: [r[k] for r in out] for k in keys}
+
+
+def json_record(record: dict[str, Any]) -> dict[str, Any]:
+    """A record as standard JSON holds it: the infinite errors of a missed image as null."""
+    return {k: None if isinstance(v, float) and math.isinf(v) else v for k, v in record.items()}
 
 
 def box_description(boxes: Path | None) -> str:
@@ -195,20 +201,27 @@ def by_factor(
     """ADD@0.02 m (the headline ADD: ADD-S for a symmetric object, `add_metric`) per (factor, group) and
     variant; sample ids are image ids (scgen: im_id = sample_id).
 
-    The groups file's own split, when it names one, overrides `split`. A grouped image whose target is
-    not visible is not evaluated; `n` gives the images each group's value is over (None when 0).
+    With a box file, `groups` is on those boxes and `groups_gt_boxes` on the ground-truth boxes, so each
+    group shows the gap the detector costs. The groups file's own split, when it names one, overrides
+    `split`. A grouped image whose target is not visible is not evaluated; `n` gives the images each
+    group's value is over (None when 0).
     """
     file_split, groups = read_groups(groups_file)
     split = file_split or split
     wanted = {i for gs in groups.values() for ids in gs.values() for i in ids}
-    per_variant: dict[str, list[dict[int, float]]] = {}
     names: set[str] = set()
-    for ckpt in ckpts:
-        result = evaluate(data, ckpt, split, boxes, wanted, workers, batch_size, obj_id)
-        key, name = headline_add(result.summary["symmetric"])
-        names.add(name)
-        per_variant.setdefault(result.variant, []).append({r["im_id"]: r[key] for r in result.records})
-    evaluated = set.intersection(*(set(run) for runs in per_variant.values() for run in runs))
+
+    def per_variant(box_file: Path | None) -> dict[str, list[dict[int, float]]]:
+        runs: dict[str, list[dict[int, float]]] = {}
+        for ckpt in ckpts:
+            result = evaluate(data, ckpt, split, box_file, wanted, workers, batch_size, obj_id)
+            key, name = headline_add(result.summary["symmetric"])
+            names.add(name)
+            runs.setdefault(result.variant, []).append({r["im_id"]: r[key] for r in result.records})
+        return runs
+
+    tables = {"groups": per_variant(boxes)} | ({"groups_gt_boxes": per_variant(None)} if boxes else {})
+    evaluated = set.intersection(*(set(run) for runs in tables["groups"].values() for run in runs))
 
     def recall(ids: list[int], runs: list[dict[int, float]]) -> float | None:
         ids = [i for i in ids if i in evaluated]
@@ -218,13 +231,16 @@ def by_factor(
         "metric": "add_0.02m",
         "add_metric": "/".join(sorted(names)),
         "split": split,
-        "columns": list(per_variant),
-        "runs": {v: len(r) for v, r in per_variant.items()},
+        "boxes": box_description(boxes),
+        "columns": list(tables["groups"]),
+        "runs": {v: len(r) for v, r in tables["groups"].items()},
         "n": {f: {g: len(set(ids) & evaluated) for g, ids in gs.items()} for f, gs in groups.items()},
-        "groups": {
-            f: {g: {v: recall(ids, runs) for v, runs in per_variant.items()} for g, ids in gs.items()}
+    } | {
+        name: {
+            f: {g: {v: recall(ids, runs) for v, runs in table.items()} for g, ids in gs.items()}
             for f, gs in groups.items()
-        },
+        }
+        for name, table in tables.items()
     }
 
 

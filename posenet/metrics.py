@@ -130,7 +130,11 @@ def headline_add(symmetric: bool) -> tuple[str, str]:
 def summarise(errors: dict[str, list[float]], diameter: float, symmetric: bool) -> dict[str, Any]:
     """Dataset summary: mean re_deg, re_sym_deg, te_m, esa; recalls in [0, 1]: add_0.02m and add_0.1d of
     the headline ADD (`add_metric`, see headline_add), adds_0.1d, mssd_0.1d, and BOP19's ar_mssd (MSSD's
-    recall averaged over MSSD_THRESHOLDS)."""
+    recall averaged over MSSD_THRESHOLDS).
+
+    An instance without an estimate (a missed detection) has infinite errors: it fails every recall, and
+    the means are over the estimated instances only (nan when there is none).
+    """
     n = len(errors["re_deg"])
     add_key, add_name = headline_add(symmetric)
 
@@ -138,7 +142,8 @@ def summarise(errors: dict[str, list[float]], diameter: float, symmetric: bool) 
         return sum(e < thr for e in errors[key]) / n if n else math.nan
 
     def mean(key: str) -> float:
-        return sum(errors[key]) / n if n else math.nan
+        finite = [e for e in errors[key] if math.isfinite(e)]
+        return sum(finite) / len(finite) if finite else math.nan
 
     return {
         "n": n,
