@@ -1,13 +1,22 @@
-"""Shared by the posenet tests: one small rendered dataset per session."""
+"""Shared by the posenet tests: one small rendered dataset per session, a briefly trained checkpoint."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
+from click.testing import CliRunner
 
+from posenet.cli import main as posenet_main
 from scgen.runner import RenderJob, run_render
 
+# the smoke preset shrunk to a 64 px crop: a checkpoint in seconds for the eval and box-file tests
+TINY_POSE = """\
+preset: smoke
+model: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, fc_dims: [64, 32]}
+data: {workers: 0}
+optim: {batch_size: 4, epochs: 1}
+"""
 N_IMAGES = 24
 RESOLUTION = (320, 240)
 
@@ -48,3 +57,14 @@ def occluded_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
         run_render(job, progress=False)
         tmp.rename(out)
     return out
+
+
+def tiny_pose_checkpoint(dataset: Path, tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:
+    """`posenet train` with TINY_POSE for 2 steps on `dataset`; the path of its last.pt."""
+    root = tmp_path_factory.mktemp(name)
+    (root / "tiny.yaml").write_text(TINY_POSE)
+    args = ["train", "--data", dataset, "--out", root / "run", "--config", root / "tiny.yaml"]
+    args += ["--max-steps", 2]
+    res = CliRunner().invoke(posenet_main, [str(a) for a in args])
+    assert res.exit_code == 0, res.output
+    return root / "run" / "last.pt"

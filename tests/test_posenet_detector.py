@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 from click.testing import CliRunner
-from posenet_helpers import posenet_dataset
+from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
 from posenet.detect import Detection, box_metrics, detect, detector_dataset, load_detector
@@ -22,12 +22,6 @@ from scgen.cli import main as scgen_main
 
 # the cpu preset as a user gets it, on one thread (the machine is shared; same losses every run)
 DETECTOR = "preset: cpu\noptim: {threads: 1}\n"
-POSE = """\
-preset: smoke
-model: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, fc_dims: [64, 32]}
-data: {workers: 0}
-optim: {batch_size: 4, epochs: 1}
-"""
 
 
 def _invoke(*args: object) -> str:
@@ -51,20 +45,7 @@ def detector_run(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) ->
 
 @pytest.fixture(scope="module")
 def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("pose")
-    (root / "tiny.yaml").write_text(POSE)
-    _invoke(
-        "train",
-        "--data",
-        dataset_dir,
-        "--out",
-        root / "run",
-        "--config",
-        root / "tiny.yaml",
-        "--max-steps",
-        2,
-    )
-    return root / "run" / "last.pt"
+    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory, "pose")
 
 
 def test_detector_learns_visible_boxes(dataset_dir: Path, detector_run: Path) -> None:

@@ -7,18 +7,11 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from posenet_helpers import posenet_dataset
+from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
 from posenet.evaluate import evaluate, format_table
 from scgen.cli import main as scgen_main
-
-TINY = """\
-preset: smoke
-model: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, fc_dims: [64, 32]}
-data: {workers: 0}
-optim: {batch_size: 4, epochs: 1}
-"""
 
 # Float32 forwards round differently per batch size: absolute tolerances in each key's unit (the rotation
 # error's is loose because arccos is steep near 0 and 180 deg); recalls and counts must be equal
@@ -42,22 +35,7 @@ def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def checkpoint(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("eval_run")
-    (root / "tiny.yaml").write_text(TINY)
-    args = [
-        "train",
-        "--data",
-        dataset_dir,
-        "--out",
-        root / "run",
-        "--config",
-        root / "tiny.yaml",
-        "--max-steps",
-        2,
-    ]
-    res = CliRunner().invoke(main, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
-    return root / "run" / "last.pt"
+    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory, "eval_run")
 
 
 def test_eval_writes_summary_and_predictions(dataset_dir: Path, checkpoint: Path, tmp_path: Path) -> None:
