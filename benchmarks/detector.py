@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from posenet.detect import box_metrics, detect, detection_entries, detector_dataset, load_detector
-from posenet.detector import image_groups, load_detector_config, visible_boxes
+from posenet.detect import box_metrics, detect_split, detection_entries
+from posenet.detector import load_detector_config, visible_boxes
 from posenet.evaluate import EvalResult, evaluate, format_table
 from posenet.metrics import headline_add
 from posenet.train import LAST
@@ -75,9 +75,7 @@ def main() -> None:
     train_detector(args.data, args.out, cfg, resume=resume, max_steps=args.max_steps)
     ckpt = args.out / BEST if (args.out / BEST).is_file() else args.out / LAST
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    model, state = load_detector(ckpt, device)
-    images = image_groups(args.data, "test", cfg.obj_id)
-    dets = detect(model, detector_dataset(state, images), device)
+    images, dets, state = detect_split(ckpt, args.data, "test", cfg.obj_id, device)
     gt = {d.key: visible_boxes(i) for d, i in zip(dets, images, strict=True)}
     groups = sample_groups(args.data, "test", args.groups_n, args.groups_seed)["groups"]
     rows = []

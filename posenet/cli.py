@@ -15,8 +15,8 @@ from posenet.bench import PAPER, device_label, format_report, resolve_device, ru
 from posenet.config import load_config
 from posenet.data.boxes import boxes_from_gt
 from posenet.data.layout import scan_split
-from posenet.detect import detect, detection_entries, detector_dataset, load_detector
-from posenet.detector import image_groups, load_detector_config
+from posenet.detect import detect_split, detection_entries
+from posenet.detector import load_detector_config
 from posenet.errors import PosenetError
 from posenet.evaluate import BATCH_SIZE, bop_results_csv, evaluate, format_table, json_record
 from posenet.evaluate import by_factor as run_by_factor
@@ -250,8 +250,7 @@ def boxes(
         label = "ground-truth"
     else:
         device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
-        model, state = load_detector(detector, device)
-        dets = detect(model, detector_dataset(state, image_groups(data, split, obj_id)), device)
+        _, dets, _ = detect_split(detector, data, split, obj_id, device)
         entries = detection_entries(dets, obj_id, f"detector:{detector}")
         label = f"detector ({sum(d.box is None for d in dets)} misses)"
     atomic_write_text(out, json.dumps(entries) + "\n")

@@ -18,7 +18,14 @@ from torchvision.models.detection import FCOS
 
 from posenet.checkpoint import load_checkpoint
 from posenet.data.boxes import miss_entry
-from posenet.detector import DetectionDataset, build_detector, collate, detector_config_from_dict
+from posenet.data.layout import Instance
+from posenet.detector import (
+    DetectionDataset,
+    build_detector,
+    collate,
+    detector_config_from_dict,
+    image_groups,
+)
 from posenet.errors import PosenetError
 
 
@@ -62,6 +69,16 @@ def detect(model: FCOS, dataset: DetectionDataset, device: torch.device) -> list
             box = tuple(float(v) for v in pred["boxes"][best])
             out.append(Detection(key, box, float(pred["scores"][best]), toc))
     return out
+
+
+def detect_split(
+    ckpt: Path, data: Path, split: str, obj_id: int, device: torch.device
+) -> tuple[list[list[Instance]], list[Detection], dict[str, Any]]:
+    """The detector checkpoint run over the split's images that show `obj_id`: those images (each its
+    instances), their detections, and the checkpoint."""
+    model, state = load_detector(ckpt, device)
+    images = image_groups(data, split, obj_id)
+    return images, detect(model, detector_dataset(state, images), device), state
 
 
 def detector_dataset(state: dict[str, Any], images: list) -> DetectionDataset:

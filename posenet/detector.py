@@ -33,6 +33,7 @@ from posenet.models.backbone import checked_weights, timm_features
 PRESETS = ("cpu", "paper")
 ALIASES = {"smoke": "cpu"}
 ARCHS = ("fcos-timm-fpn", "fcos-resnet50-fpn")
+STRIDES = (2, 4, 8, 16, 32)  # the backbone strides fcos-timm-fpn may predict at (min_stride ... 32)
 
 
 @dataclass
@@ -119,8 +120,8 @@ def detector_config_from_dict(raw: dict[str, Any]) -> DetectorConfig:
     for name, value in sizes.items():
         if value < 1:
             raise PosenetError(f"detector {name} must be >= 1, got {value}")
-    if cfg.min_stride not in (2, 4, 8, 16, 32):
-        raise PosenetError(f"detector min_stride must be 2, 4, 8, 16 or 32, got {cfg.min_stride}")
+    if cfg.min_stride not in STRIDES:
+        raise PosenetError(f"detector min_stride must be one of {list(STRIDES)}, got {cfg.min_stride}")
     return cfg
 
 
@@ -156,7 +157,7 @@ def build_detector(model_config: dict[str, Any], weights: str | None = None) -> 
     else:
         # one anchor per location, its size the level's stride: FCOS then assigns a box to the level
         # whose [4, 8] x stride range holds its largest side distance, and samples centres within 1.5 strides
-        strides = [s for s in (2, 4, 8, 16, 32) if s >= model_config["min_stride"]]
+        strides = [s for s in STRIDES if s >= model_config["min_stride"]]
         anchors = AnchorGenerator(sizes=tuple((s,) for s in strides), aspect_ratios=((1.0,),) * len(strides))
         channels = model_config["fpn_channels"]
         backbone = TimmFpn(model_config["backbone"], channels, strides, weights)
@@ -211,7 +212,6 @@ def _read_rgb(path: Path) -> np.ndarray:
 def paste_target(
     img: np.ndarray,
     boxes: np.ndarray,
-    donor_img: np.ndarray,
     donor: list[Instance],
     rng: np.random.Generator,
     scale: tuple[float, float],
@@ -225,7 +225,7 @@ def paste_target(
         return img, boxes
     x0, y0, x1, y1 = (int(v) for v in visible_boxes(shown[:1])[0])
     mask = cv2.imread(str(shown[0].mask_visib), cv2.IMREAD_GRAYSCALE)[y0:y1, x0:x1] > 0
-    patch, s = donor_img[y0:y1, x0:x1], rng.uniform(*scale)
+    patch, s = _read_rgb(shown[0].rgb)[y0:y1, x0:x1], rng.uniform(*scale)
     h, w = img.shape[:2]
     size = (max(1, round(patch.shape[1] * s)), max(1, round(patch.shape[0] * s)))
     if size[0] >= w or size[1] >= h:
@@ -277,7 +277,7 @@ class DetectionDataset(Dataset):
             c = self.cfg
             if rng.random() < c.paste_prob:
                 donor = self.images[int(rng.integers(len(self.images)))]
-                img, boxes = paste_target(img, boxes, _read_rgb(donor[0].rgb), donor, rng, c.zoom)
+                img, boxes = paste_target(img, boxes, donor, rng, c.zoom)
             if rng.random() < c.zoom_prob:
                 img, boxes = random_zoom(img, boxes, rng, c.zoom)
             if rng.random() < c.flip_prob:

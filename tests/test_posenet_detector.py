@@ -153,7 +153,7 @@ def test_copy_paste_and_mirror_move_the_target_with_its_box(dataset_dir: Path) -
     donor_img = cv2.cvtColor(cv2.imread(str(donor[0].rgb)), cv2.COLOR_BGR2RGB).astype(np.float32) / 255
     own = np.float32([[0, 0, 20, 20]])
     canvas = np.zeros_like(donor_img)
-    out, boxes = paste_target(canvas, own, donor_img, donor, np.random.default_rng(0), (1.0, 1.0))
+    out, boxes = paste_target(canvas, own, donor, np.random.default_rng(0), (1.0, 1.0))
     assert len(boxes) == 2 and np.array_equal(boxes[0], own[0])
     x0, y0, x1, y1 = (int(v) for v in visible_boxes(donor[:1])[0])
     px, py, qx, qy = (int(v) for v in boxes[1])
