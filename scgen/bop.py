@@ -12,6 +12,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import trimesh
 
@@ -51,6 +52,12 @@ def rgb_path(scene: Path, im_id: int, ext: str = "png") -> Path:
 
 def mask_path(scene: Path, im_id: int, inst: int, visib: bool = False) -> Path:
     return scene / MASK_DIRS[visib] / f"{im_id:06d}_{inst:06d}.png"
+
+
+def read_mask(path: Path) -> np.ndarray | None:
+    """A mask PNG as a bool array (pixels over half of 8-bit white), or None when missing or unreadable."""
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    return None if img is None else img > 127
 
 
 def xyz_path(scene: Path, im_id: int, inst: int) -> Path:

@@ -127,11 +127,6 @@ def check_bop_entries(scene_files: dict[str, Any], rec: dict[str, Any]) -> list[
     return out
 
 
-def _read_mask(path: Path) -> np.ndarray | None:
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    return None if img is None else img > 127
-
-
 def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], lo: np.ndarray,
                  hi: np.ndarray, target: tuple[np.ndarray, np.ndarray, float]) -> list[str]:  # fmt: skip
     """Problems of one sample: files, mask inclusion, boxes and counts, xyz reprojection and bounds,
@@ -140,8 +135,8 @@ def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], 
     out: list[str] = []
     rgb_path = layout.rgb(split, sid, manifest["rgb_format"])
     rgb = cv2.imread(str(rgb_path), cv2.IMREAD_COLOR)
-    mask = _read_mask(layout.mask(split, sid))
-    visib = _read_mask(layout.mask(split, sid, visib=True))
+    mask = bop.read_mask(layout.mask(split, sid))
+    visib = bop.read_mask(layout.mask(split, sid, visib=True))
     if rgb is None or mask is None or visib is None:
         return [f"unreadable or missing image/mask ({rgb_path.parent.parent})"]
     if mask.shape != rgb.shape[:2] or visib.shape != rgb.shape[:2]:
@@ -177,8 +172,7 @@ def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], 
     if crop.shape[:2] != (h, w):
         return out + [f"xyz map is {crop.shape[1]}x{crop.shape[0]}, box says {w}x{h}"]
     vis_crop = visib[y : y + h, x : x + w]
-    if np.abs(crop[~vis_crop]).max(initial=0) > 0:
-        out.append("xyz map non-zero outside mask_visib")
+    out += check_xyz_support(crop, vis_crop)
     out += check_xyz(crop, vis_crop, (x, y), rec, lo, hi)
     if depth is not None:
         out += check_depth(depth[y : y + h, x : x + w], crop, vis_crop, rec, manifest["xyz_dtype"])
@@ -215,6 +209,13 @@ def check_depth(
     err = np.abs(depth[vs, us] * unit_m - (C @ R.T + t)[:, 2])
     bad = int((err > 0.5 * unit_m + rounding + 1e-9).sum())
     return [f"depth differs from the xyz map's z at {bad} of {len(err)} visible pixels"] if bad else []
+
+
+def check_xyz_support(crop: np.ndarray, vis: np.ndarray) -> list[str]:
+    """An xyz map (crop) must be zero outside mask_visib (cropped alike): the labels of hidden pixels would
+    teach a network the surface behind an occluder."""
+    n = int((np.abs(crop).max(axis=-1) > 0)[~vis].sum())
+    return [f"xyz map non-zero at {n} pixels outside mask_visib"] if n else []
 
 
 def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: dict[str, Any],
@@ -280,8 +281,8 @@ def check_bop_image(data: BopDataset, image: BopImage, entries: list[dict[str, A
     taken = np.zeros((H, W), np.int32)
     out: list[str] = []
     for k, ((obj_id, R, t), info) in enumerate(zip(image.instances, entries, strict=True)):
-        mask = _read_mask(bop.mask_path(scene, image.im_id, k))
-        visib = _read_mask(bop.mask_path(scene, image.im_id, k, visib=True))
+        mask = bop.read_mask(bop.mask_path(scene, image.im_id, k))
+        visib = bop.read_mask(bop.mask_path(scene, image.im_id, k, visib=True))
         if mask is None or visib is None or mask.shape != (H, W) or visib.shape != (H, W):
             out.append(f"instance {k}: mask or mask_visib missing, unreadable or not {W}x{H}")
             continue
@@ -319,9 +320,7 @@ def check_bop_xyz(scene: Path, image: BopImage, k: int, visib: np.ndarray, info:
     vis_crop = visib[max(y, 0) : y + h, max(x, 0) : x + w]
     if crop.shape[:2] != (h, w) or vis_crop.shape != (h, w):
         return [f"xyz map is {crop.shape[1]}x{crop.shape[0]}, xyz_box {box} (inside the image) says {w}x{h}"]
-    out = []
-    if np.abs(crop[~vis_crop]).max(initial=0) > 0:
-        out.append("xyz map non-zero outside mask_visib")
+    out = check_xyz_support(crop, vis_crop)
     vs, us = np.nonzero(vis_crop)
     if len(vs) == 0:
         return out

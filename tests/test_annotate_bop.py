@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from scgen import bop
 from scgen.bop_annotate import record_path
 from scgen.cli import main
-from scgen.exr import read_xyz_exr
+from scgen.exr import encode_xyz_exr, read_xyz_exr
 from scgen.validate import reprojection_error
 from tests.bop_fixture import SPLIT, build_bop_dataset, first_hits, object_meshes
 
@@ -216,3 +216,20 @@ def test_posenet_trains_and_scores_a_symmetric_object_on_the_annotated_dataset(
     ]
     assert lines[0] == BOP_HEADER and len(lines) - 1 == len(visible) > 0
     assert all(row.split(",")[2] == "5" for row in lines[1:])
+
+
+def test_validate_names_an_xyz_map_non_zero_outside_mask_visib(annotated: Path, tmp_path: Path):
+    root = tmp_path / "planted"
+    shutil.copytree(annotated, root)
+    scene = root / SPLIT / "000002"
+    x, y, w, h = bop.read_json(bop.scene_file(scene, "scene_gt_info"))["4"][1]["xyz_box"]
+    visib = read_mask(bop.mask_path(scene, 4, 1, visib=True))[y : y + h, x : x + w]
+    crop = read_xyz_exr(bop.xyz_path(scene, 4, 1))
+    vs, us = np.nonzero(~visib)
+    crop[vs[:3], us[:3]] = crop[visib][0]  # a visible pixel's coordinates on three hidden pixels
+    bop.xyz_path(scene, 4, 1).write_bytes(encode_xyz_exr(crop, "float16"))
+    result = run("validate", str(root))
+    assert result.exit_code == 1
+    message = f"FAIL {scene} image 4: instance 1: xyz map non-zero at 3 pixels outside mask_visib"
+    assert message in result.output
+    assert "1 problem(s) in 4 samples" in result.output
