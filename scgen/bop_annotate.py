@@ -2,7 +2,10 @@
 
 Per image, one Mitsuba scene holds every scene_gt instance placed by its pose; one ray per pixel centre
 gives the first hit (visible mask, depth, then xyz = Rᵀ(z·K⁻¹p̄ − t)), and each instance cast alone
-gives its full mask. Objects that scene_gt does not list are not in the scene, so they occlude nothing.
+gives its full mask. Objects that scene_gt does not list are not in the scene, so they occlude nothing
+there: where the dataset has its own mask_visib, that mask is the authority (xyz is zero outside it), and
+the pixels where it and the ray cast disagree are counted per instance in the image's record and per
+split in the run's summary.
 
 Resumable like `render`: an image's files are written atomically and its record
 `{scene}/annotate/{im_id:06d}.json` last; an image is done when its record and every file the record
@@ -19,7 +22,7 @@ import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +30,7 @@ import numpy as np
 from tqdm import tqdm
 
 from scgen import bop
-from scgen.annotate.bop_labels import InstanceLabels, instance_labels, projection_box
+from scgen.annotate.bop_labels import InstanceLabels, VisibDisagreement, instance_labels, projection_box
 from scgen.atomic import atomic_write_bytes, atomic_write_text, remove_stale_temporaries
 from scgen.bop import read_json
 from scgen.bop_dataset import BopDataset, BopImage, open_bop_dataset, read_models
@@ -59,8 +62,29 @@ def record_path(scene: Path, im_id: int) -> Path:
     return scene / RECORDS_DIR / f"{im_id:06d}.json"
 
 
-def label_image(data: BopDataset, image: BopImage, models: Models) -> list[InstanceLabels]:
-    """Labels of every scene_gt instance of one image, in scene_gt order."""
+def kept(path: Path, opts: AnnotateOptions) -> bool:
+    """Whether the dataset's own file at `path` stays: it exists and `overwrite` is off."""
+    return not opts.overwrite and path.is_file()
+
+
+def own_visib_masks(data: BopDataset, image: BopImage, opts: AnnotateOptions) -> list[np.ndarray | None]:
+    """The image's kept mask_visib of every instance, in scene_gt order (None where there is none)."""
+    out: list[np.ndarray | None] = []
+    for k in range(len(image.instances)):
+        path = bop.mask_path(data.scene(image), image.im_id, k, visib=True)
+        if not kept(path, opts):
+            out.append(None)
+            continue
+        mask = bop.read_mask(path)
+        if mask is None or mask.shape != data.size[::-1]:
+            raise ScgenError(f"{path} is unreadable or not {data.size[0]}x{data.size[1]}")
+        out.append(mask)
+    return out
+
+
+def label_image(data: BopDataset, image: BopImage, models: Models,
+                own_visib: list[np.ndarray | None]) -> list[InstanceLabels]:  # fmt: skip
+    """Labels of every scene_gt instance of one image, in scene_gt order, given the kept mask_visib."""
     camera = data.camera(image)
     shapes = [raycast.place_mesh(f"inst{k}", *models[obj_id], R, t)
               for k, (obj_id, R, t) in enumerate(image.instances)]  # fmt: skip
@@ -69,7 +93,7 @@ def label_image(data: BopDataset, image: BopImage, models: Models) -> list[Insta
     for k, ((obj_id, R, t), shape) in enumerate(zip(image.instances, shapes, strict=True)):
         box = projection_box(models[obj_id][0], R, t, camera)
         full = raycast.cast([shape], camera, box)[0] == 0 if box else np.zeros((0, 0), bool)
-        labels.append(instance_labels(k, index, depth, full, box or (0, 0, 0, 0), camera, R, t))
+        labels.append(instance_labels(k, index, depth, full, box or (0, 0, 0, 0), camera, R, t, own_visib[k]))
     return labels
 
 
@@ -79,7 +103,7 @@ def write_image(scene: Path, im_id: int, labels: list[InstanceLabels], opts: Ann
     for k, lab in enumerate(labels):
         for visib, mask in ((False, lab.mask), (True, lab.mask_visib)):
             path = bop.mask_path(scene, im_id, k, visib)
-            if opts.overwrite or not path.is_file():
+            if not kept(path, opts):
                 path.parent.mkdir(parents=True, exist_ok=True)
                 atomic_write_bytes(path, encode_png(mask.astype(np.uint8) * 255))
             files.append(path)
@@ -91,7 +115,8 @@ def write_image(scene: Path, im_id: int, labels: list[InstanceLabels], opts: Ann
         atomic_write_bytes(path, encode_xyz_exr(lab.xyz, opts.xyz_dtype))
         files.append(path)
     record = {"files": [str(p.relative_to(scene)) for p in files], "overwrite": opts.overwrite,
-              "xyz_dtype": opts.xyz_dtype, "scene_gt_info": [lab.gt_info for lab in labels]}  # fmt: skip
+              "xyz_dtype": opts.xyz_dtype, "scene_gt_info": [lab.gt_info for lab in labels],
+              "visib_disagreement": [asdict(lab.disagreement) for lab in labels]}  # fmt: skip
     path = record_path(scene, im_id)
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, dumps(record))
@@ -152,15 +177,23 @@ def _init(context: _Context) -> None:
     raycast.start(context.threads)
 
 
-def _annotate(image: BopImage) -> int:
-    """Label and write one image; returns its instance count."""
+def _annotate(image: BopImage) -> tuple[int, VisibDisagreement]:
+    """Label and write one image; returns its instance count and its disagreement with its own masks."""
     assert _context is not None
+    data, opts = _context.data, _context.opts
     try:
-        labels = label_image(_context.data, image, _context.models)
-        write_image(_context.data.scene(image), image.im_id, labels, _context.opts)
+        labels = label_image(data, image, _context.models, own_visib_masks(data, image, opts))
+        write_image(data.scene(image), image.im_id, labels, opts)
     except Exception as exc:
         raise ScgenError(f"{image.split}/{image.scene_id:06d} image {image.im_id}: {exc}") from exc
-    return len(labels)
+    return len(labels), sum((lab.disagreement for lab in labels), VisibDisagreement())
+
+
+def disagreement_line(per_split: dict[str, VisibDisagreement]) -> str:
+    """The run's disagreement with the dataset's own mask_visib, in one line."""
+    parts = [f"{s} {d.cast_only} / {d.mask_only}" for s, d in sorted(per_split.items())]
+    return ("visibility vs the dataset's mask_visib (px seen only by the ray cast / only in mask_visib): "
+            f"{', '.join(parts) or 'no images annotated'}")  # fmt: skip
 
 
 def run_annotate(job: AnnotateJob, progress: bool = True) -> dict[str, Any]:
@@ -175,20 +208,21 @@ def run_annotate(job: AnnotateJob, progress: bool = True) -> dict[str, Any]:
         remove_stale_temporaries(data.root / split)
     todo = [im for im in data.images if done_record(data.scene(im), im.im_id, job.options) is None]
     bar = tqdm(total=len(todo), unit="img", desc="annotate", disable=not progress, file=sys.stderr)
-    instances = 0
+    results: list[tuple[str, int, VisibDisagreement]] = []  # split, instances, disagreement per image
     t0 = time.perf_counter()
     try:
         if job.workers == 1 and todo:
             _init(context)
             for image in todo:
-                instances += _annotate(image)
+                results.append((image.split, *_annotate(image)))
                 bar.update(1)
         elif todo:
             workers = min(job.workers, len(todo))
             pool = ProcessPoolExecutor(workers, mp.get_context("spawn"), _init, (context,))
             try:
-                for fut in as_completed([pool.submit(_annotate, image) for image in todo]):
-                    instances += fut.result()
+                futures = {pool.submit(_annotate, image): image for image in todo}
+                for fut in as_completed(futures):
+                    results.append((futures[fut].split, *fut.result()))
                     bar.update(1)
             except BrokenProcessPool as exc:
                 raise ScgenError("a worker process died; run the same command again to resume") from exc
@@ -197,5 +231,9 @@ def run_annotate(job: AnnotateJob, progress: bool = True) -> dict[str, Any]:
     finally:
         bar.close()
         scenes = finalize(data, job.options)  # complete scenes stay usable, even after a failure
-    return {"annotated": len(todo), "skipped": len(data.images) - len(todo), "instances": instances,
-            "total_s": time.perf_counter() - t0, "scenes": scenes}  # fmt: skip
+    disagreement: dict[str, VisibDisagreement] = defaultdict(VisibDisagreement)
+    for split, _, d in results:
+        disagreement[split] += d
+    return {"annotated": len(todo), "skipped": len(data.images) - len(todo),
+            "instances": sum(n for _, n, _ in results), "total_s": time.perf_counter() - t0,
+            "scenes": scenes, "disagreement": dict(disagreement)}  # fmt: skip

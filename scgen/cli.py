@@ -162,7 +162,7 @@ def render(
 def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: bool, xyz_dtype: str,
              quiet: bool) -> None:  # fmt: skip
     """Label any BOP dataset: xyz maps of every scene_gt instance, masks and scene_gt_info where missing."""
-    from scgen.bop_annotate import AnnotateJob, AnnotateOptions, run_annotate
+    from scgen.bop_annotate import AnnotateJob, AnnotateOptions, disagreement_line, run_annotate
 
     job = AnnotateJob(bop_dir, split, workers or os.cpu_count() or 1, AnnotateOptions(xyz_dtype, overwrite))
     s = run_annotate(job, progress=not quiet)
@@ -171,6 +171,7 @@ def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: b
         f"{bop_dir}: annotated {s['annotated']} images ({s['instances']} instances, {rate:.1f} instances/s), "
         f"skipped {s['skipped']} already complete; scene_gt_info.json of {s['scenes']} scene(s) written"
     )
+    click.echo(disagreement_line(s["disagreement"]))
 
 
 @main.command()

@@ -1,8 +1,12 @@
-"""`scgen annotate` on a BOP dataset scgen did not write (tests/bop_fixture.py): labels, resume, validate."""
+"""`scgen annotate` on a BOP dataset scgen did not write (tests/bop_fixture.py) and on one scgen rendered
+with props scene_gt does not list: labels, the dataset's own mask_visib as authority, resume, validate."""
 
 from __future__ import annotations
 
+import json
+import re
 import shutil
+from collections import Counter
 from pathlib import Path
 
 import cv2
@@ -29,6 +33,21 @@ def tree(root: Path) -> dict[str, bytes]:
 
 def read_mask(path: Path) -> np.ndarray:
     return cv2.imread(str(path), cv2.IMREAD_UNCHANGED) > 127
+
+
+def xyz_support(scene: Path, im: int, k: int, info: dict, size: tuple[int, int]) -> np.ndarray:
+    """The image-sized mask of the pixels where the instance's xyz map is non-zero."""
+    out = np.zeros(size[::-1], bool)
+    if info["xyz_box"] is not None:
+        x, y, w, h = info["xyz_box"]
+        out[y : y + h, x : x + w] = np.abs(read_xyz_exr(bop.xyz_path(scene, im, k))).max(axis=-1) > 0
+    return out
+
+
+def reported(output: str) -> dict[str, tuple[int, int]]:
+    """split -> (pixels visible only to the ray cast, only in mask_visib), from annotate's last line."""
+    found = re.findall(r"(\w+) (\d+) / (\d+)", output.splitlines()[-1])
+    return {split: (int(a), int(b)) for split, a, b in found}
 
 
 def images(root: Path):
@@ -216,6 +235,71 @@ def test_posenet_trains_and_scores_a_symmetric_object_on_the_annotated_dataset(
     ]
     assert lines[0] == BOP_HEADER and len(lines) - 1 == len(visible) > 0
     assert all(row.split(",")[2] == "5" for row in lines[1:])
+
+
+def test_props_scene_gt_does_not_list_get_no_xyz_and_are_counted(small_dataset: Path, tmp_path: Path):
+    """An scgen dataset (Mitsuba) with its xyz maps deleted: the props hide parts of the target but are not
+    in scene_gt. The rebuilt maps stay inside the dataset's mask_visib, equal the rendered ones, and the
+    run reports, per split, the pixels of the target's silhouette that mask_visib hides."""
+    root = tmp_path / "rendered"
+    shutil.copytree(small_dataset, root)
+    for path in root.glob("*/*/xyz/*.exr"):
+        path.unlink()
+    result = run("annotate", str(root), "--workers", "1", "--quiet")
+    assert result.exit_code == 0, result.output
+    hidden: Counter[str] = Counter()  # per split: silhouette pixels mask_visib hides, from the render's masks
+    for split in bop.split_names(root):
+        for scene in bop.scene_dirs(root, split):
+            infos = bop.read_json(bop.scene_file(scene, "scene_gt_info"))
+            for im, (info,) in infos.items():
+                mask, visib = (read_mask(bop.mask_path(scene, int(im), 0, v)) for v in (False, True))
+                assert (xyz_support(scene, int(im), 0, info, (320, 240)) == visib).all()
+                rendered = read_xyz_exr(bop.xyz_path(small_dataset / split / scene.name, int(im), 0))
+                rebuilt = read_xyz_exr(bop.xyz_path(scene, int(im), 0))
+                assert np.abs(rebuilt - rendered).max() <= 2e-4  # float16 rounding of ~0.1 m values
+                record = bop.read_json(record_path(scene, int(im)))["visib_disagreement"]
+                assert record == [{"cast_only": int((mask & ~visib).sum()), "mask_only": 0}]
+                hidden[split] += int((mask & ~visib).sum())
+    assert reported(result.output) == {split: (n, 0) for split, n in hidden.items()}
+    assert sum(hidden.values()) > 100  # the props do occlude the target
+    assert run("validate", str(root)).exit_code == 0
+
+
+def test_an_unlisted_occluder_and_stray_mask_pixels_are_counted_each_way(annotated: Path, tmp_path: Path):
+    """The fixture's front object of image 3 leaves scene_gt (an unannotated distractor) and its first
+    remaining instance's mask_visib gains a block of background pixels. Re-annotated, the xyz maps stay
+    inside the dataset's masks; the distractor's pixels count as seen only by the ray cast (measured with
+    trimesh's independent ray cast), the block as only in mask_visib."""
+    root = tmp_path / "distractor"
+    shutil.copytree(annotated, root)
+    scene, im = root / SPLIT / "000001", 3
+    gt = bop.read_json(bop.scene_file(scene, "scene_gt"))
+    gt[str(im)] = gt[str(im)][1:]
+    bop.scene_file(scene, "scene_gt").write_text(json.dumps(gt))
+    for k in range(3):
+        bop.xyz_path(scene, im, k).unlink()
+        for visib in (False, True):
+            if k:
+                bop.mask_path(scene, im, k, visib).replace(bop.mask_path(scene, im, k - 1, visib))
+    record_path(scene, im).unlink()
+    K = bop.camera_K(bop.read_json(bop.scene_file(scene, "scene_camera"))[str(im)])
+    index, _, _ = first_hits(gt[str(im)], K, object_meshes())
+    assert (index[:4, :6] == -1).all()  # the block is background
+    stray = read_mask(bop.mask_path(scene, im, 0, visib=True))
+    stray[:4, :6] = True
+    cv2.imwrite(str(bop.mask_path(scene, im, 0, visib=True)), stray.astype(np.uint8) * 255)
+    result = run("annotate", str(root), "--workers", "1", "--quiet")
+    assert result.exit_code == 0, result.output
+    assert "annotated 1 images" in result.output
+    info = bop.read_json(bop.scene_file(scene, "scene_gt_info"))[str(im)]
+    visibs = [read_mask(bop.mask_path(scene, im, k, visib=True)) for k in range(2)]
+    for k, visib in enumerate(visibs):
+        assert not (xyz_support(scene, im, k, info[k], (160, 120)) & ~visib).any()
+    assert not xyz_support(scene, im, 0, info[0], (160, 120))[:4, :6].any()
+    cast_only = sum(int(((index == k) & ~visib).sum()) for k, visib in enumerate(visibs))
+    ours = reported(result.output)[SPLIT]
+    assert cast_only > 100 and abs(ours[0] - cast_only) <= 2  # equal here; edge pixels may flip
+    assert ours[1] == 24
 
 
 def test_validate_names_an_xyz_map_non_zero_outside_mask_visib(annotated: Path, tmp_path: Path):
