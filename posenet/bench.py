@@ -18,6 +18,7 @@ class BenchRow:
     """One variant's measurements (or the paper's figures for it)."""
 
     name: str
+    backbone: str
     params_m: float
     macs_g: float
     latency_ms: float
@@ -28,11 +29,11 @@ class BenchRow:
 PAPER: dict[str, BenchRow] = {
     r.name: r
     for r in (
-        BenchRow("gdrnet", 35.05, 11.42, 22.0, 45.45),
-        BenchRow("convnext", 47.22, 13.86, 24.3, 41.15),
-        BenchRow("afr", 47.67, 14.92, 27.0, 37.04),
-        BenchRow("pgsa", 47.29, 13.93, 24.8, 40.32),
-        BenchRow("gap-gdrnet", 47.75, 14.99, 27.8, 35.97),
+        BenchRow("gdrnet", "resnet34", 35.05, 11.42, 22.0, 45.45),
+        BenchRow("convnext", "convnext_tiny", 47.22, 13.86, 24.3, 41.15),
+        BenchRow("afr", "convnext_tiny", 47.67, 14.92, 27.0, 37.04),
+        BenchRow("pgsa", "convnext_tiny", 47.29, 13.93, 24.8, 40.32),
+        BenchRow("gap-gdrnet", "convnext_tiny", 47.75, 14.99, 27.8, 35.97),
     )
 }
 
@@ -88,23 +89,31 @@ def measure_latency_ms(
     return 1000 * statistics.median(times)
 
 
-def bench_variant(name: str, preset: str, device: torch.device, warmup: int, iters: int) -> BenchRow:
-    """Build variant `name` in `preset`'s configuration from random init and measure it in eval mode."""
-    model = create_model(name, preset).to(device).eval()
+def bench_variant(
+    name: str, preset: str, device: torch.device, warmup: int, iters: int, backbone: str | None = None
+) -> BenchRow:
+    """Build variant `name` in `preset`'s configuration (on `backbone`, else the preset's) from random init
+    and measure it in eval mode: only the architecture, no weights are needed."""
+    model = create_model(name, preset, **({"backbone": backbone} if backbone else {})).to(device).eval()
     inputs = dummy_inputs(model.config, device)
     params = sum(p.numel() for p in model.parameters())
     macs = count_macs(model, inputs)
     latency = measure_latency_ms(model, inputs, warmup, iters)
-    return BenchRow(name, params / 1e6, macs / 1e9, latency, 1000 / latency)
+    return BenchRow(name, model.config.backbone, params / 1e6, macs / 1e9, latency, 1000 / latency)
 
 
 def run_bench(
-    names: list[str], device: torch.device, warmup: int = 3, iters: int = 10, smoke: bool = False
+    names: list[str],
+    device: torch.device,
+    warmup: int = 3,
+    iters: int = 10,
+    smoke: bool = False,
+    backbone: str | None = None,
 ) -> list[BenchRow]:
     """Bench each variant in turn, freeing it before the next."""
     rows = []
     for name in names:
-        rows.append(bench_variant(name, "smoke" if smoke else "paper", device, warmup, iters))
+        rows.append(bench_variant(name, "smoke" if smoke else "paper", device, warmup, iters, backbone))
         if device.type == "cuda":
             torch.cuda.empty_cache()
     return rows
@@ -122,7 +131,7 @@ def format_report(rows: list[BenchRow], device: str, paper: dict[str, BenchRow] 
     header = "; (paper Table 4, RTX 4090)" if paper else ""
     lines = [
         f"device: {device}; batch 1; MACs = FLOPs/2 from torch.utils.flop_counter{header}",
-        f"{'variant':<11} {'params M':>17} {'MACs G':>17} {'latency ms':>17} {'FPS':>17}",
+        f"{'variant':<11} {'backbone':<22} {'params M':>17} {'MACs G':>17} {'latency ms':>17} {'FPS':>17}",
     ]
     for r in rows:
         p = paper.get(r.name)
@@ -130,7 +139,7 @@ def format_report(rows: list[BenchRow], device: str, paper: dict[str, BenchRow] 
             _cell(getattr(r, field), p and getattr(p, field), digits, bracket=bool(paper))
             for field, digits in (("params_m", 2), ("macs_g", 2), ("latency_ms", 1), ("fps", 2))
         ]
-        lines.append(f"{r.name:<11} " + " ".join(f"{c:>17}" for c in cells))
+        lines.append(f"{r.name:<11} {r.backbone:<22} " + " ".join(f"{c:>17}" for c in cells))
     by_name = {r.name: r for r in rows}
     if {"gdrnet", "gap-gdrnet"} <= by_name.keys():
         ours = by_name["gap-gdrnet"].latency_ms / by_name["gdrnet"].latency_ms

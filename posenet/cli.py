@@ -220,8 +220,8 @@ def eval_cmd(
 def train_detector_cmd(
     data: Path, out: Path, config: str | None, max_steps: int | None, resume: bool, obj_id: int | None
 ) -> None:
-    """Train the single-class target detector (FCOS; random init or `weights:` a local backbone file) on the
-    visible boxes (bbox_visib)."""
+    """Train the single-class target detector (FCOS on an ImageNet backbone: `pretrained:` imagenet,
+    package, a local file or null) on the visible boxes (bbox_visib)."""
     if config is None:
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "cpu"
@@ -270,6 +270,7 @@ def boxes(
 @click.option("--iters", type=click.IntRange(min=1), default=10, show_default=True, help="Timed forwards.")
 @click.option("--threads", type=click.IntRange(min=1), help="CPU intra-op threads (default: torch's).")
 @click.option("--smoke", is_flag=True, help="Bench the reduced-width CPU presets instead of the paper's.")
+@click.option("--backbone", help="Any timm backbone with a stride-32 map, instead of the preset's.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Also write JSON.")
 def bench(
     variants: tuple[str, ...],
@@ -278,13 +279,15 @@ def bench(
     iters: int,
     threads: int | None,
     smoke: bool,
+    backbone: str | None,
     json_path: Path | None,
 ) -> None:
-    """Params, MACs and batch-1 latency / FPS of the pose-network variants, from random init."""
+    """Params, MACs and batch-1 latency / FPS of the pose-network variants (architecture only, random
+    init: no weights needed)."""
     if threads:
         torch.set_num_threads(threads)
     dev = resolve_device(device)
-    rows = run_bench(list(variants or VARIANTS), dev, warmup, iters, smoke)
+    rows = run_bench(list(variants or VARIANTS), dev, warmup, iters, smoke, backbone)
     label = device_label(dev)
     click.echo(format_report(rows, label, paper={} if smoke else PAPER))
     if json_path:

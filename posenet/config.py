@@ -9,8 +9,11 @@ A config file (YAML or TOML) may name a base `preset` (paper or smoke) and overr
     optim: {epochs: 20, lr: 1.0e-3}
 
 `preset`, `variant` and `model` are the arguments of `posenet.models.create_model(variant, preset,
-**model)`: the variant fixes the modules (ggca, mecs, pgsa) and the backbone family, `model` overrides
-any ModelConfig field of the preset without changing the variant. `to_dict()` is what is saved as
+**model)`: the variant fixes the modules (ggca, mecs, pgsa), `model` overrides any ModelConfig field of
+the preset (the backbone included) without changing the modules; a file's `model` table is merged over
+the preset's. Training starts from ImageNet weights: `model.pretrained` is 'imagenet' (timm's, downloaded)
+in the paper preset and 'package' (the weights the EfficientNet-Lite0 package ships) in the CPU preset;
+`pretrained: null` trains from random init. `to_dict()` is what is saved as
 OUT/config.yaml; it reloads to the same configuration.
 """
 
@@ -26,6 +29,7 @@ import yaml
 
 from posenet.errors import PosenetError
 from posenet.models import PRESETS, ModelConfig
+from posenet.models.backbone import IMAGENET, PACKAGE
 
 
 @dataclass
@@ -85,7 +89,8 @@ class OptimConfig:
 class TrainConfig:
     preset: str = "paper"
     variant: str = "gdrnet"
-    model: dict[str, Any] = field(default_factory=dict)  # ModelConfig field overrides of create_model
+    # ModelConfig field overrides of create_model; the paper trains from timm's ImageNet weights
+    model: dict[str, Any] = field(default_factory=lambda: {"pretrained": IMAGENET})
     data: DataConfig = field(default_factory=DataConfig)
     loss: LossConfig = field(default_factory=LossConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
@@ -115,6 +120,7 @@ def smoke_config() -> TrainConfig:
     """Reduced CPU preset: the smoke model preset, small batches, short warmup, few loader processes."""
     return TrainConfig(
         preset="smoke",
+        model={"pretrained": PACKAGE},  # ImageNet Lite0 without a download (posenet.models.backbone)
         data=DataConfig(workers=2, bg_pool_size=8),
         # lr 2e-3: from scratch, 3e-3 memorised 64 crops faster than 1e-3 (docs/posenet.md); 40 epochs of the
         # 700-image benchmark set (3480 steps) fit the 35-minute CPU budget
@@ -150,7 +156,7 @@ def config_from_dict(raw: dict[str, Any]) -> TrainConfig:
         elif key == "model":
             if not isinstance(value, dict):
                 raise PosenetError("config 'model' must be a table")
-            cfg.model = dict(value)
+            cfg.model = {**cfg.model, **value}
         elif key == "variant":
             cfg.variant = value
         elif key != "resolved_model":

@@ -73,26 +73,29 @@ def test_smoke_preset_keeps_the_variant_modules(name: str) -> None:
 
 @pytest.fixture(scope="module")
 def backbone_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """ImageNet-style classifier state dicts of the smoke backbones, as a user would have on disk."""
+    """ImageNet-style classifier state dicts (timm keys), as a user would have on disk."""
     root = tmp_path_factory.mktemp("weights")
     files = {}
-    for name in {ModelConfig.create(v, "smoke").backbone for v in VARIANTS}:
+    for name in ("resnet18", "convnext_atto"):
         torch.manual_seed(1)
         files[name] = root / f"{name}.pth"
         torch.save(timm.create_model(name, pretrained=False).state_dict(), files[name])
     return files
 
 
-@pytest.mark.parametrize("name", list(VARIANTS))
-def test_local_backbone_weights_load(name: str, backbone_files: dict[str, Path]) -> None:
-    config = ModelConfig.create(name, "smoke")
-    path = backbone_files[config.backbone]
+@pytest.mark.parametrize(("name", "backbone"), [("gdrnet", "resnet18"), ("pgsa", "convnext_atto")])
+def test_local_backbone_weights_load(name: str, backbone: str, backbone_files: dict[str, Path]) -> None:
+    """forward_features of these two is their stride-32 map (EfficientNet's adds a 1x1 conv head)."""
+    config = ModelConfig.create(name, "smoke", backbone=backbone)
+    path = backbone_files[backbone]
     reference = timm.create_model(config.backbone, pretrained=False)
     reference.load_state_dict(torch.load(path))
-    model = create_model(name, "smoke", pretrained=str(path)).eval()
+    model = create_model(name, "smoke", backbone=config.backbone, pretrained=str(path)).eval()
     x = torch.rand(1, 3, config.input_res, config.input_res)
-    with torch.no_grad():
-        assert torch.equal(model.backbone(x), reference.eval().forward_features(x))
+    mean, std = (torch.tensor(reference.pretrained_cfg[k]).view(1, 3, 1, 1) for k in ("mean", "std"))
+    with torch.no_grad():  # the backbone feeds its weights the normalisation they were trained with
+        expected = reference.eval().forward_features((x - mean) / std)
+        assert torch.allclose(model.backbone(x), expected, atol=1e-5)
     saved = torch.load(path)
     conv = next(k for k in saved if k.endswith("weight") and saved[k].ndim == 4)  # stem conv
     assert any(torch.equal(saved[conv], v) for v in model.backbone.state_dict().values())
@@ -100,7 +103,8 @@ def test_local_backbone_weights_load(name: str, backbone_files: dict[str, Path])
 
 def test_wrong_weights_file_is_refused(backbone_files: dict[str, Path], tmp_path: Path) -> None:
     with pytest.raises(PosenetError, match="not a convnext_atto state dict"):
-        create_model("convnext", "smoke", pretrained=str(backbone_files["resnet18"]))
+        resnet = str(backbone_files["resnet18"])
+        create_model("convnext", "smoke", backbone="convnext_atto", pretrained=resnet)
     with pytest.raises(PosenetError, match="not found"):
         create_model("gdrnet", "smoke", pretrained=str(tmp_path / "missing.pth"))
 
@@ -119,8 +123,8 @@ def test_config_dict_identifies_and_rebuilds_checkpoints() -> None:
     [
         (("resnet",), {}, "unknown variant 'resnet'"),
         (("gdrnet", "large"), {}, "unknown preset 'large'"),
-        (("gdrnet", "smoke"), {"ggca": True}, "describe variant 'custom', not 'gdrnet'"),
-        (("gdrnet", "smoke"), {"backbone": "convnext_atto"}, "describe variant 'convnext', not 'gdrnet'"),
+        (("gdrnet", "smoke"), {"ggca": True}, "is not variant 'gdrnet'"),
+        (("gdrnet", "smoke"), {"backbone": "resnet_nonesuch"}, "unknown backbone 'resnet_nonesuch'"),
         (("gdrnet", "smoke"), {"width": 3}, "unknown model field"),
         (("gdrnet", "smoke"), {"head_channels": "abc"}, "head_channels must be int, got 'abc'"),
         (("gdrnet", "smoke"), {"fc_dims": [1.5]}, "fc_dims must be tuple"),
@@ -137,6 +141,18 @@ def test_create_model_refuses_another_variant_and_bad_fields(
 def test_overrides_within_the_variant_are_kept() -> None:
     config = ModelConfig.create("gap-gdrnet", "smoke", ggca=True, backbone="convnext_femto", fc_dims=[64, 32])
     assert (config.backbone, config.fc_dims, config.variant) == ("convnext_femto", (64, 32), "gap-gdrnet")
+    # the backbone is free: GDR-Net on a ConvNeXt is still the gdrnet row, not the convnext one
+    assert ModelConfig.create("gdrnet", "smoke", backbone="convnext_atto").variant == "gdrnet"
+
+
+def test_smoke_preset_compares_every_variant_on_one_backbone() -> None:
+    assert {ModelConfig.create(v, "smoke").backbone for v in VARIANTS} == {"tf_efficientnet_lite0"}
+    assert [ModelConfig.create(v).backbone for v in ("gdrnet", "gap-gdrnet")] == ["resnet34", "convnext_tiny"]
+
+
+def test_backbone_without_a_stride_32_map_is_refused() -> None:
+    with pytest.raises(PosenetError, match="stride 16, not 32"):
+        create_model("gdrnet", "smoke", backbone="vit_tiny_patch16_224")
 
 
 def test_pnp_input_is_xyz_visible_mask_regions_and_roi_coordinates() -> None:

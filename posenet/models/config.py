@@ -8,6 +8,8 @@ import typing
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+import timm
+
 from posenet.errors import PosenetError
 
 
@@ -31,28 +33,30 @@ VARIANTS: dict[str, Variant] = {
 }
 
 PRESETS = ("paper", "smoke")
-# The CPU smoke preset: small timm backbones of the same family, every module of the variant kept narrower.
-SMOKE_BACKBONES = {"resnet34": "resnet18", "convnext_tiny": "convnext_atto"}
-SMOKE_SIZES: dict[str, Any] = dict(
-    input_res=128, output_res=32, head_channels=64, pnp_channels=64, fc_dims=(256, 128)
+# The CPU smoke preset: every variant on one small backbone whose ImageNet weights a package ships (so the
+# GDR-Net and GAP-GDRNet rows compare on one backbone), every module of the variant kept narrower.
+SMOKE_FIELDS: dict[str, Any] = dict(
+    backbone="tf_efficientnet_lite0",
+    input_res=128,
+    output_res=32,
+    head_channels=64,
+    pnp_channels=64,
+    fc_dims=(256, 128),
 )
-
-
-def backbone_family(backbone: str) -> str:
-    """'resnet' or 'convnext' for the timm names we use; the name itself otherwise."""
-    return next((f for f in ("resnet", "convnext") if backbone.startswith(f)), backbone)
 
 
 @dataclass(frozen=True)
 class ModelConfig:
     """Architecture of a GDR-Net / GAP-GDRNet model; defaults are the paper's full GAP-GDRNet.
 
-    Make one with `ModelConfig.create(variant, preset, **overrides)`. The backbone is a timm name with a
-    stride-32 last feature map; the geometric head upsamples it ×8, so `output_res` must be
-    `input_res / 4`. `pretrained` is a local backbone state dict (timm or torchvision ImageNet checkpoint
-    of the same architecture); it only affects initialisation and is therefore not part of `to_dict()`.
+    Make one with `ModelConfig.create(variant, preset, **overrides)`. The variant fixes the modules
+    (ggca, mecs, pgsa) and its paper backbone; `backbone` may name any timm model with a stride-32 last
+    feature map. The geometric head upsamples it ×8, so `output_res` must be `input_res / 4`. `pretrained`
+    (None, 'imagenet', 'package' or a local file: posenet.models.backbone) only affects initialisation
+    and is therefore not part of `to_dict()`.
     """
 
+    variant: str = "gap-gdrnet"
     backbone: str = "convnext_tiny"
     ggca: bool = True
     mecs: bool = True
@@ -95,39 +99,29 @@ class ModelConfig:
         failed = [message for ok, message in rules if not ok]
         if failed:
             raise PosenetError("invalid ModelConfig: " + "; ".join(failed))
+        if self.variant not in VARIANTS:
+            raise PosenetError(f"unknown variant {self.variant!r}; choose one of {', '.join(VARIANTS)}")
+        modules = VARIANTS[self.variant]
+        if (self.ggca, self.mecs, self.pgsa) != (modules.ggca, modules.mecs, modules.pgsa):
+            raise PosenetError(
+                f"ggca={self.ggca}, mecs={self.mecs}, pgsa={self.pgsa} is not variant {self.variant!r} "
+                "(the variant sets the modules; choose the variant that has them)"
+            )
+        if not timm.is_model(self.backbone):
+            raise PosenetError(f"unknown backbone {self.backbone!r}: not a timm model name")
 
     @classmethod
     def create(cls, variant: str, preset: str = "paper", **overrides: Any) -> ModelConfig:
         """The `preset` configuration of paper variant `variant`, with any fields overridden.
 
-        The overrides must keep the variant (its ggca, mecs, pgsa and backbone family), so a config
-        file cannot build another ablation row under this one's name; a checkpoint's `config_dict()`
+        The overrides must keep the variant's modules (ggca, mecs, pgsa), so a config file cannot build
+        another ablation row under this one's name; the backbone is free. A checkpoint's `config_dict()`
         (every field) rebuilds its own configuration.
         """
         unknown = sorted(set(overrides) - {f.name for f in dataclasses.fields(cls)})
         if unknown:
             raise PosenetError(f"unknown model field(s): {', '.join(unknown)}")
-        config = cls(**{**_preset_fields(variant, preset), **overrides})
-        if config.variant != variant:
-            raise PosenetError(
-                f"model fields describe variant {config.variant!r}, not {variant!r} "
-                "(the variant sets ggca, mecs, pgsa and the backbone family)"
-            )
-        return config
-
-    @property
-    def variant(self) -> str:
-        """Name of the paper variant this configuration is an instance of, or 'custom'."""
-        family = backbone_family(self.backbone)
-        for name, v in VARIANTS.items():
-            if (backbone_family(v.backbone), v.ggca, v.mecs, v.pgsa) == (
-                family,
-                self.ggca,
-                self.mecs,
-                self.pgsa,
-            ):
-                return name
-        return "custom"
+        return cls(**{**_preset_fields(variant, preset), **overrides})
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able architecture description (no `pretrained`): equal dicts mean compatible weights."""
@@ -142,10 +136,8 @@ def _preset_fields(variant: str, preset: str) -> dict[str, Any]:
         raise PosenetError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
     if preset not in PRESETS:
         raise PosenetError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
-    fields = VARIANTS[variant]._asdict()
-    if preset == "smoke":
-        return {**fields, "backbone": SMOKE_BACKBONES[fields["backbone"]], **SMOKE_SIZES}
-    return fields
+    fields = {"variant": variant, **VARIANTS[variant]._asdict()}
+    return {**fields, **SMOKE_FIELDS} if preset == "smoke" else fields
 
 
 def _has_type(value: Any, hint: Any) -> bool:

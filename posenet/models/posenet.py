@@ -74,7 +74,7 @@ class PoseNet(nn.Module):
 
     def config_dict(self) -> dict[str, Any]:
         """JSON-able identity of the architecture, stored in checkpoints; `create_model(**d)` rebuilds it."""
-        return {"variant": self.config.variant, **self.config.to_dict()}
+        return self.config.to_dict()
 
 
 def create_model(variant: str, preset: str = "paper", **overrides: Any) -> PoseNet:
