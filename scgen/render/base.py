@@ -24,13 +24,17 @@ class Backend(Protocol):
 
 
 def check_backend(name: str, device: str = "auto") -> None:
-    """Fail fast, before anything is written, when a backend cannot run here; builds no renderer.
+    """Fail fast, before anything is written, when a backend cannot run here; builds no renderer here.
 
     Only `--device gpu` imports bpy (to ask Cycles for a GPU); otherwise the modules are only located.
+    Mitsuba's variant and libLLVM are settled here, by a child process, before drjit is imported.
     """
     if name == "mitsuba":
         if importlib.util.find_spec("mitsuba") is None:
             raise ScgenError("the mitsuba backend needs the mitsuba package: pip install mitsuba")
+        from scgen.render.mitsuba_llvm import mitsuba_setup
+
+        mitsuba_setup()
     elif name == "blender":
         from scgen.render.blender_env import check_bpy, check_device, import_bpy, select_device
 

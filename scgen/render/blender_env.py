@@ -9,6 +9,7 @@ import re
 import sys
 from collections.abc import Iterator
 from types import ModuleType
+from typing import Any
 
 from scgen.errors import ScgenError
 
@@ -53,19 +54,27 @@ def check_device(device: str) -> None:
         raise ScgenError(f"unknown device '{device}' (choose from {', '.join(DEVICES)})")
 
 
+def gpu_devices(bpy: ModuleType) -> Iterator[tuple[str, list[Any]]]:
+    """Each GPU API Cycles finds a device of, in order of preference, with the API's device list (which
+    also holds the CPU); each API is the selected one while it is yielded."""
+    prefs = bpy.context.preferences.addons["cycles"].preferences
+    for api in GPU_BACKENDS:
+        with quiet_stdout():  # Cycles prints a warning for every GPU library it fails to open
+            prefs.compute_device_type = api
+            devices = prefs.get_devices_for_type(api)
+        if any(d.type == api for d in devices):
+            yield api, devices
+
+
 def select_device(bpy: ModuleType, device: str) -> str:
     """Enable the Cycles compute device for `device` (auto|cpu|gpu); returns 'CPU' or the GPU API used."""
     check_device(device)
     prefs = bpy.context.preferences.addons["cycles"].preferences
     if device != "cpu":
-        with quiet_stdout():  # Cycles prints a warning for every GPU library it fails to open
-            for api in GPU_BACKENDS:
-                prefs.compute_device_type = api
-                devices = prefs.get_devices_for_type(api)
-                if any(d.type == api for d in devices):
-                    for d in devices:
-                        d.use = d.type == api
-                    return api
+        for api, devices in gpu_devices(bpy):
+            for d in devices:
+                d.use = d.type == api
+            return api
     prefs.compute_device_type = "NONE"
     if device == "gpu":
         raise ScgenError(

@@ -7,8 +7,6 @@ filtered or jittered sample ever blends two surfaces at an edge.
 
 from __future__ import annotations
 
-import sys
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -18,27 +16,19 @@ from scgen.model import TargetModel
 from scgen.render.backgrounds import background_image, linear_to_srgb8
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, check_quality, render_seed
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
+from scgen.render.mitsuba_llvm import mitsuba_setup
 from scgen.render.mitsuba_materials import box_uv, build_bsdfs, texture_scale
 from scgen.render.props import prop_mesh
 from scgen.scenes.spec import SceneSpec
 
 QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
-_variant_notice_shown = False
 
 
 def select_variant() -> str:
-    """llvm_ad_rgb when libLLVM works, else scalar_rgb with a one-line notice."""
-    global _variant_notice_shown
-    if mi.variant() is not None:
-        return mi.variant()
-    try:
-        mi.set_variant("llvm_ad_rgb")
-        dr.eval(dr.llvm.Float([1.0]) * 2)  # forces LLVM to compile once
-    except Exception as exc:  # missing/broken libLLVM
-        mi.set_variant("scalar_rgb")
-        if not _variant_notice_shown:
-            print(f"scgen: Mitsuba LLVM variant unavailable ({exc}); using scalar_rgb", file=sys.stderr)
-            _variant_notice_shown = True
+    """Set the variant mitsuba_llvm chose for this process (llvm_ad_rgb when its libLLVM renders, else
+    scalar_rgb), unless one is set already; returns the variant in use."""
+    if mi.variant() is None:
+        mi.set_variant(mitsuba_setup().variant)
     return mi.variant()
 
 
@@ -197,6 +187,8 @@ class MitsubaBackend:
 
 def cast_rays(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ray length, index of the hit shape in `shapes` (-1 = miss) and geometric normal, rays from origin."""
+    if not dr.is_jit_v(mi.Float):
+        return _cast_rays_one_by_one(scene, shapes, dirs)
     o = mi.Point3f(0.0, 0.0, 0.0)
     ray = mi.Ray3f(o, mi.Vector3f(dirs[:, 0], dirs[:, 1], dirs[:, 2]))
     si = scene.ray_intersect(ray)
@@ -213,6 +205,20 @@ def cast_rays(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarr
     return t, idx, np.where(valid[:, None], n, 0.0)
 
 
+def _cast_rays_one_by_one(
+    scene: mi.Scene, shapes: list, dirs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """cast_rays for scalar_rgb (the fallback without a usable libLLVM), whose rays go one at a time."""
+    index = {id(s): k for k, s in enumerate(shapes)}
+    t, idx, n = np.full(len(dirs), np.inf), np.full(len(dirs), -1, np.int64), np.zeros((len(dirs), 3))
+    o = mi.Point3f(0.0, 0.0, 0.0)
+    for i, d in enumerate(dirs.tolist()):
+        si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(d)))
+        if si.is_valid():
+            t[i], idx[i], n[i] = si.t, index.get(id(si.shape), -1), si.n
+    return t, idx, n
+
+
 def _registry_id(ptr: mi.ShapePtr) -> np.ndarray:
     """Dr.Jit stores shape pointers as registry ids: one vectorised comparison instead of one per shape."""
     return np.asarray(dr.reinterpret_array(mi.UInt32, ptr)).astype(np.int64)
@@ -221,6 +227,9 @@ def _registry_id(ptr: mi.ShapePtr) -> np.ndarray:
 def _occluded(scene: mi.Scene, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
     if len(origins) == 0:
         return np.zeros(0, bool)
+    if not dr.is_jit_v(mi.Float):  # scalar_rgb: one ray at a time
+        d = mi.Vector3f(direction.tolist())
+        return np.array([scene.ray_test(mi.Ray3f(mi.Point3f(o), d)) for o in origins.tolist()], bool)
     ray = mi.Ray3f(
         mi.Point3f(origins[:, 0], origins[:, 1], origins[:, 2]),
         mi.Vector3f(*[np.full(len(origins), float(x)) for x in direction]),

@@ -1,0 +1,116 @@
+"""Render one small real sample in a child process: can a renderer run here, and with what.
+
+A renderer can fail where no `except` reaches: LLVM aborts the whole process on a kernel it cannot
+compile (libLLVM 15: `Cannot select: fmaximum`), a GPU driver can crash bpy. So the libLLVM check
+(scgen.render.mitsuba_llvm) and `scgen doctor` ask a child, `python -m scgen.render.probe mitsuba|blender`.
+The child reports what it found (the libLLVM it loaded, Cycles' GPUs) before it renders, so a crash still
+leaves the report; exit status 0 means the sample rendered.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from scgen.model import TargetModel
+
+SAMPLE = (0, 3)  # seed, index: props, the Earth and its earthshine: every light and pass a sample can have
+RESOLUTION = (32, 24)
+TIMEOUT_S = 300
+REPORT = "scgen-probe: "  # marks the child's report lines among whatever the renderer prints
+
+
+@dataclass(frozen=True)
+class ProbeResult:
+    """What the child reported, and why its sample did not render (None: it rendered)."""
+
+    facts: dict[str, Any]
+    error: str | None
+
+
+def probe(backend: str, env: dict[str, str] | None = None) -> ProbeResult:
+    """Render the probe sample with `backend` (mitsuba: its LLVM variant) in a child process.
+
+    `env` is the child's environment (default: this process's), e.g. another DRJIT_LIBLLVM_PATH.
+    """
+    command = [sys.executable, "-m", "scgen.render.probe", backend]
+    try:
+        done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        return ProbeResult({}, f"its test render did not finish in {TIMEOUT_S} s")
+    facts: dict[str, Any] = {}
+    for line in done.stdout.splitlines():
+        if line.startswith(REPORT):
+            facts.update(json.loads(line[len(REPORT) :]))
+    return ProbeResult(facts, None if done.returncode == 0 else failure(done.stderr, done.returncode))
+
+
+def failure(stderr: str, returncode: int) -> str:
+    """The line of a failed child's stderr that says why: LLVM's or Dr.Jit's own, else the last one."""
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
+    own = (line for line in lines if line.startswith("LLVM ERROR") or re.match(r"jitc?_\w+\(\): ", line))
+    cause = next(own, lines[-1] if lines else None)
+    if cause is None:
+        return f"it exited with status {returncode}" if returncode > 0 else f"it died of signal {-returncode}"
+    return re.sub(r" ?0x[0-9a-f]+:?,?", "", cause).split(". ")[0][:200]  # without LLVM's node addresses
+
+
+def _report(**facts: Any) -> None:
+    print(REPORT + json.dumps(facts), flush=True)
+
+
+def _loaded_libllvm() -> str | None:
+    """The libLLVM file this process has mapped (Linux), or None."""
+    with open("/proc/self/maps") as maps:
+        return next((line.split()[-1] for line in maps if "/libLLVM" in line), None)
+
+
+def _mitsuba(model: TargetModel) -> Any:
+    import drjit as dr  # loads libLLVM
+    import mitsuba as mi
+
+    from scgen.render.mitsuba_llvm import LLVM_VARIANT
+
+    version = dr.detail.llvm_version()
+    _report(libllvm=_loaded_libllvm(), version=".".join(map(str, version)) if version[0] > 0 else None)
+    mi.set_variant(LLVM_VARIANT)  # the variant under test; the backend keeps a variant already set
+    from scgen.render.mitsuba_backend import MitsubaBackend
+
+    return MitsubaBackend(model, quality="draft")
+
+
+def _blender(model: TargetModel) -> Any:
+    from scgen.render.blender import BlenderBackend
+    from scgen.render.blender_env import gpu_devices, import_bpy
+
+    gpus = {api: [d.name for d in devices if d.type == api] for api, devices in gpu_devices(import_bpy())}
+    _report(gpus=gpus)
+    return BlenderBackend(model, quality="draft", device="cpu")  # a first GPU render may compile for minutes
+
+
+def main(backend: str) -> None:
+    from scgen.model import load_target
+    from scgen.scenes import TargetShape, load_config, sample_scene
+
+    model = load_target()
+    cfg = load_config(resolution=RESOLUTION)
+    spec = sample_scene(*SAMPLE, cfg, TargetShape.from_mesh(model.mesh, model.diameter))
+    renderer = {"mitsuba": _mitsuba, "blender": _blender}[backend](model)
+    start = time.perf_counter()
+    renderer.render(spec)
+    _report(render_s=round(time.perf_counter() - start, 2))
+
+
+if __name__ == "__main__":
+    from scgen.errors import ScgenError
+
+    try:
+        main(sys.argv[1])
+    except ScgenError as exc:  # a renderer that cannot start here says why in one line, as the CLI does
+        sys.exit(str(exc))

@@ -1,0 +1,90 @@
+"""Mitsuba on a libLLVM it cannot use: the run finishes on scalar_rgb (same labels), or on a newer libLLVM.
+
+Real renders with the machine's own libLLVMs: LLVM 15 aborts on Dr.Jit's fminimum/fmaximum kernels,
+Dr.Jit refuses 14; both are tested where the machine has them, a path that does not exist everywhere.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from scgen.render.mitsuba_llvm import (
+    LIBLLVM_ENV,
+    LIBLLVM_GLOBS,
+    VERDICT_ENV,
+    Libllvm,
+    libllvm_major,
+    newer_libllvms,
+)
+from scgen.runner import RenderJob, run_render
+
+NOTICE = "scgen: Mitsuba cannot render with"
+
+
+def machine_libllvm(major: int) -> str | None:
+    """A libLLVM of this major version on this machine, or None."""
+    return next((p for g in LIBLLVM_GLOBS for p in sorted(glob.glob(g)) if libllvm_major(p) == major), None)
+
+
+def scgen(*args: str, **env: str) -> subprocess.CompletedProcess:
+    """`scgen ARGS` in a fresh process, with this environment less any libLLVM choice, plus `env`."""
+    base = {k: v for k, v in os.environ.items() if k not in (LIBLLVM_ENV, VERDICT_ENV)}
+    command = [sys.executable, "-m", "scgen.cli", *args]
+    return subprocess.run(command, env={**base, **env}, capture_output=True, text=True, timeout=600)
+
+
+def render_args(out: Path) -> list[str]:
+    return ["render", "--backend", "mitsuba", "--n", "2", "--resolution", "160x120", "--workers", "2",
+            "--quality", "draft", "--quiet", "--out", str(out)]  # fmt: skip
+
+
+def labels(root: Path) -> dict[str, bytes]:
+    """Every label file of a dataset (masks, xyz maps, BOP JSON), by relative path; RGB left out."""
+    files = [p for p in root.rglob("*") if p.is_file() and "/rgb/" not in str(p) and p.suffix != ".csv"]
+    return {str(p.relative_to(root)): p.read_bytes() for p in files if p.parent != root}
+
+
+@pytest.fixture(scope="module")
+def llvm_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The two samples rendered by this process (the LLVM variant where its libLLVM works)."""
+    out = tmp_path_factory.mktemp("llvm") / "ds"
+    run_render(RenderJob(out, 2, backend="mitsuba", quality="draft", resolution=(160, 120), workers=2), False)
+    return out
+
+
+OLD = [pytest.param(machine_libllvm(m), id=f"libLLVM-{m}",
+                    marks=pytest.mark.skipif(machine_libllvm(m) is None, reason=f"no libLLVM {m} here"))
+       for m in (15, 14)]  # fmt: skip
+
+
+@pytest.mark.parametrize("libllvm", [*OLD, pytest.param("/nonexistent/libLLVM.so", id="missing")])
+def test_unusable_libllvm_renders_on_scalar_with_one_notice_and_the_same_labels(
+    libllvm: str, llvm_dataset: Path, tmp_path: Path
+):
+    done = scgen(*render_args(tmp_path / "ds"), **{LIBLLVM_ENV: libllvm})
+    assert done.returncode == 0, done.stderr
+    notices = [line for line in done.stderr.splitlines() if line.startswith(NOTICE)]
+    assert len(notices) == 1, done.stderr  # decided once, in the parent; both workers inherit it
+    assert "rendering with scalar_rgb" in notices[0] and "apt-get install libllvm19" in notices[0]
+    assert not [line for line in done.stderr.splitlines() if line.startswith("LLVM ERROR")]  # no abort
+    assert "2/2 on disk" in done.stdout
+    assert labels(tmp_path / "ds") == labels(llvm_dataset)
+
+
+def test_old_default_libllvm_gives_way_to_a_newer_one_on_the_machine(tmp_path: Path):
+    old = machine_libllvm(15)
+    if old is None or not newer_libllvms(Libllvm(old, "15", None)):
+        pytest.skip("needs libLLVM 15 and a newer libLLVM on this machine")
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "libLLVM.so").symlink_to(old)  # Dr.Jit's first pick: libLLVM.so on the library path
+    done = scgen(*render_args(tmp_path / "ds"), LD_LIBRARY_PATH=str(tmp_path / "lib"))
+    assert done.returncode == 0, done.stderr
+    notices = [line for line in done.stderr.splitlines() if line.startswith(NOTICE)]
+    assert len(notices) == 1 and "libLLVM 15" in notices[0] and "found on this machine" in notices[0]
+    assert "2/2 on disk" in done.stdout
