@@ -17,6 +17,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 demo: install
+	$(BIN)/scgen doctor --out demo_out
 	$(BIN)/scgen render --n 8 --out demo_out --seed 0
 	$(BIN)/scgen stats demo_out
 

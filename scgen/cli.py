@@ -293,5 +293,23 @@ def preview(out, n, backend, seed, model_path, keep_scale, config_path, resoluti
     click.echo(f"wrote {path} ({n} samples, {backend})")
 
 
+@main.command()
+@click.option("--out", type=click.Path(path_type=Path), default=None, help="Also check its free space.")
+@one_line_errors(ScgenError)
+def doctor(out: Path | None) -> None:
+    """Check what this machine can render and train with: one line per check, its verdict and the fix.
+
+    Exits non-zero when the default backend (blender) cannot render.
+    """
+    from scgen.doctor import FAIL, diagnose
+
+    failed = False
+    for finding in diagnose(out):
+        click.echo(str(finding))
+        failed |= finding.verdict == FAIL
+    if failed:
+        raise ScgenError("the default backend (blender) cannot render here: see the FAIL line(s) above")
+
+
 if __name__ == "__main__":
     main()

@@ -84,12 +84,13 @@ def validate_job(job: RenderJob) -> None:
         raise ScgenError(f"output {job.out} exists and is not a directory")
     if job.out.is_dir() and any(job.out.iterdir()) and not (job.out / MANIFEST).exists():
         raise ScgenError(f"output {job.out} is a non-empty folder that is not an scgen dataset")
-    parent = job.out if job.out.exists() else _existing_parent(job.out)
+    parent = job.out if job.out.exists() else existing_parent(job.out)
     if not os.access(parent, os.W_OK):
         raise ScgenError(f"output {job.out} is not writable")
 
 
-def _existing_parent(p: Path) -> Path:
+def existing_parent(p: Path) -> Path:
+    """`p`, or its nearest ancestor that exists (absolute)."""
     p = p.absolute()
     while not p.exists():
         p = p.parent
