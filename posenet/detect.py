@@ -99,8 +99,9 @@ def iou(a: tuple[float, ...] | None, b: np.ndarray) -> float:
 
 
 def box_metrics(dets: list[Detection], gt: list[np.ndarray]) -> dict[str, float]:
-    """Mean IoU (a miss counts 0), AP50 (single class, all-point interpolated; one detection per image),
-    misses and detections, over images whose target is visible (gt[i]: the visible boxes of dets[i])."""
+    """Mean IoU (a miss counts 0), the share of images at IoU >= 0.5, AP50 (single class, all-point
+    interpolated; one detection per image) and misses, over images whose target is visible (gt[i]: the
+    visible boxes of dets[i])."""
     pairs = [(d, g) for d, g in zip(dets, gt, strict=True) if len(g)]
     ious = [iou(d.box, g) for d, g in pairs]
     order = sorted(
@@ -116,6 +117,7 @@ def box_metrics(dets: list[Detection], gt: list[np.ndarray]) -> dict[str, float]
     return {
         "n": len(pairs),
         "mean_iou": float(np.mean(ious)) if ious else float("nan"),
+        "iou50": float(np.mean([v >= 0.5 for v in ious])) if ious else float("nan"),
         "ap50": ap,
         "misses": sum(d.box is None for d, _ in pairs),
     }

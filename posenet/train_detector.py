@@ -52,7 +52,7 @@ def train_detector(
     if device.type == "cpu":
         pin_cpu_threads(o.threads)
     torch.manual_seed(o.seed)
-    model = build_detector(cfg.model_dict(), cfg.weights).to(device)
+    model = build_detector(cfg.model_dict(), cfg.pretrained).to(device)
     optimizer, scheduler = make_optimizer(model, o, total)
     step, best = 0, -math.inf
     if resume:
