@@ -50,6 +50,13 @@ from scgen.runner import RenderJob, run_render
 from scgen.stats import sample_groups
 
 CURVE_POINTS = 8  # default number of evaluations over the run
+TURNED_DEG = 135.0  # a rotation error beyond this is a turned pose (the target's near-D2 symmetry)
+# issue 20's floors for the CPU recipe: (split, figure, bound, "max" | "min")
+FLOORS = (
+    ("test", "re_deg_median", 20.0, "max"),
+    ("test", "add_0.1d", 0.20, "min"),
+    ("train", "re_deg_median", 10.0, "max"),
+)
 
 
 def parse_resolution(text: str) -> tuple[int, int]:
@@ -149,12 +156,26 @@ def schedule(data: Path, cfg: TrainConfig) -> tuple[int, int, int]:
 
 
 def summary(result: EvalResult) -> dict[str, Any]:
-    """summarise()'s figures plus medians of the rotation and translation errors."""
+    """summarise()'s figures plus medians of the rotation and translation errors and the share of
+    turned poses (rotation error beyond TURNED_DEG)."""
     s = dict(result.summary)
     for key in ("re_deg", "te_m"):
         values = [r[key] for r in result.records]
         s[f"{key}_median"] = statistics.median(values) if values else math.nan
+    errors = [r["re_deg"] for r in result.records]
+    s["turned"] = sum(e > TURNED_DEG for e in errors) / len(errors) if errors else math.nan
     return s
+
+
+def floor_lines(final: dict[str, dict[str, Any]]) -> list[str]:
+    """One line per floor of FLOORS: the figure, the bound and whether it is met."""
+    lines = []
+    for split, key, bound, kind in FLOORS:
+        value = final[split][key]
+        met = value <= bound if kind == "max" else value >= bound
+        lines.append(f"{split} {key} {value:.3f} ({'<=' if kind == 'max' else '>='} {bound}): "
+                     f"{'met' if met else 'NOT met'}")  # fmt: skip
+    return lines
 
 
 def moving_average(values: np.ndarray, window: int) -> np.ndarray:
@@ -297,6 +318,7 @@ def run(args: argparse.Namespace) -> None:
                 ["instances", str(tr["n"]), str(te["n"])],
                 ["rotation error, mean (deg)", f"{tr['re_deg']:.2f}", f"{te['re_deg']:.2f}"],
                 ["rotation error, median (deg)", f"{tr['re_deg_median']:.2f}", f"{te['re_deg_median']:.2f}"],
+                [f"turned poses, > {TURNED_DEG:.0f} deg (%)", pct(tr["turned"]), pct(te["turned"])],
                 ["translation error, mean (m)", f"{tr['te_m']:.4f}", f"{te['te_m']:.4f}"],
                 ["translation error, median (m)", f"{tr['te_m_median']:.4f}", f"{te['te_m_median']:.4f}"],
                 ["ADD@0.02m (%)", pct(tr["add_0.02m"]), pct(te["add_0.02m"])],
@@ -304,6 +326,7 @@ def run(args: argparse.Namespace) -> None:
             ],
         )
     )
+    print("floors (issue 20): " + "; ".join(floor_lines(final)))
     kept = "" if cfg.data.min_visib_fract == 0 else f" with visible fraction > {cfg.data.min_visib_fract}"
     print(f"(instances: every one with a visible pixel; training used {n_train} train instances{kept})")
     cols = factors["columns"]
