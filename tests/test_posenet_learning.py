@@ -3,7 +3,7 @@ and pose, not just masks, through the real pipeline (files -> crops and targets 
 checkpoint -> decode -> errors).
 
 The failure it guards against: a network that learns the mask (brightness gives it) while xyz sits at the
-best constant prediction and the rotation error stays at a random rotation's ~126 deg. Two minutes of
+best constant prediction and the rotation error stays at a random rotation's ~126 deg. Three minutes of
 2 CPU cores cannot teach a network to generalise to held-out scenes, so this test measures on the
 training images; the held-out figures come from `benchmarks/posenet_learning.py` (README).
 """
@@ -24,12 +24,13 @@ from posenet.data import open_split
 from posenet.evaluate import evaluate, load_model
 from posenet.train import steps_per_epoch, train
 
-STEPS = 600  # at the preset's batch of 8 (about 2 minutes on 2 idle cores)
-# Measured from the ImageNet Lite0 (one thread): ratio 0.91 and median 103.5 deg at step 300, 0.53 and
-# 39.2 deg at step 600 (from random init, the earlier recipe: 0.82 and 82.8 deg at 300 steps). The failure
-# this guards against gave ~0.97 and ~126 deg.
-MAX_XYZ_RATIO = 0.95
-MAX_MEDIAN_RE_DEG = 90.0
+STEPS = 1200  # at the preset's batch of 8 (about 3 minutes on 2 idle cores)
+# Measured from the ImageNet Lite0 on 2 threads, a 1200-step schedule: ratio 0.56 and median 52.5 deg at
+# step 600, 0.42 and 8.8 deg at 900, 0.32 and 3.7 deg at 1200. A 600-step schedule was too close to where
+# pose emerges: 0.69 and 109 deg on 2 threads, 0.53 and 39 deg on one. The failure this guards against
+# gave ~0.97 and ~126 deg (a random rotation).
+MAX_XYZ_RATIO = 0.7
+MAX_MEDIAN_RE_DEG = 45.0
 
 
 @pytest.fixture(scope="module")
