@@ -29,7 +29,7 @@ from posenet.config import OptimConfig, override_fields, plain, read_config_file
 from posenet.data.augment import brightness_contrast
 from posenet.data.layout import Instance, scan_split
 from posenet.errors import PosenetError
-from posenet.models.backbone import IMAGENET, PACKAGE, initial_weights, timm_features
+from posenet.models.backbone import IMAGENET, PACKAGE, initial_weights, input_mean_std, timm_features
 
 PRESETS = ("cpu", "paper")
 ALIASES = {"smoke": "cpu"}
@@ -166,8 +166,9 @@ def build_detector(model_config: dict[str, Any], pretrained: str | None = None) 
         channels = model_config["fpn_channels"]
         backbone = TimmFpn(model_config["backbone"], channels, strides, pretrained)
         head = FCOSHead(channels, 1, 2, num_convs=model_config["head_convs"])
-        norm = {f"image_{k}": list(backbone.body.pretrained_cfg[k]) for k in ("mean", "std")}
-        model = FCOS(backbone, num_classes=2, anchor_generator=anchors, head=head, **kw, **norm)
+        mean, std = input_mean_std(backbone.body)
+        model = FCOS(backbone, num_classes=2, anchor_generator=anchors, head=head, **kw,
+                     image_mean=list(mean), image_std=list(std))  # fmt: skip
     # the box distances pass a ReLU: starting them at 1 anchor size, not 0, keeps half of them from dying
     # at once (from random init with lr 1e-3 every one did, and every box had size 0)
     nn.init.constant_(model.head.regression_head.bbox_reg.bias, 1.0)

@@ -25,6 +25,8 @@ from posenet.errors import PosenetError
 
 IMAGENET = "imagenet"
 PACKAGE = "package"
+# features-only models drop the classifier head, and timm logs each dropped key of a weights file as a warning
+logging.getLogger("timm.models._builder").setLevel(logging.ERROR)
 
 
 class ShippedWeights(NamedTuple):
@@ -141,8 +143,6 @@ def timm_features(name: str, pretrained: str | None, out_indices: tuple[int, ...
     (see the module docs); random init starts with the residual branches open."""
     weights = initial_weights(name, pretrained)
     overlay = {"state_dict": weights} if weights is not None else None
-    # features-only models drop the classifier head; timm logs each dropped key as a warning
-    logging.getLogger("timm.models._builder").setLevel(logging.ERROR)
     body = timm.create_model(
         name,
         pretrained=overlay is not None,
@@ -159,16 +159,21 @@ def timm_features(name: str, pretrained: str | None, out_indices: tuple[int, ...
     return body
 
 
+def input_mean_std(body: nn.Module) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The per-channel mean and std of [0, 1] RGB that a timm model's ImageNet weights were trained with
+    (its pretrained_cfg: 0.5 / 0.5 for EfficientNet-Lite, ImageNet's for ResNet and ConvNeXt)."""
+    return tuple(body.pretrained_cfg["mean"]), tuple(body.pretrained_cfg["std"])
+
+
 class InputNorm(nn.Module):
-    """RGB in [0, 1] -> the normalisation the backbone's ImageNet weights were trained with (timm's
-    pretrained_cfg mean / std: (x - 0.5) / 0.5 for EfficientNet-Lite, ImageNet's mean / std for ResNet
-    and ConvNeXt). Not saved in state dicts: it is a property of the backbone name."""
+    """RGB in [0, 1] -> (x - mean) / std of `input_mean_std`. Not saved in state dicts: it is a property
+    of the backbone name."""
 
     def __init__(self, body: nn.Module) -> None:
         super().__init__()
-        cfg = body.pretrained_cfg
-        self.register_buffer("mean", torch.tensor(cfg["mean"]).view(1, 3, 1, 1), persistent=False)
-        self.register_buffer("std", torch.tensor(cfg["std"]).view(1, 3, 1, 1), persistent=False)
+        mean, std = input_mean_std(body)
+        self.register_buffer("mean", torch.tensor(mean).view(1, 3, 1, 1), persistent=False)
+        self.register_buffer("std", torch.tensor(std).view(1, 3, 1, 1), persistent=False)
 
     def forward(self, x: Tensor) -> Tensor:
         return (x - self.mean) / self.std

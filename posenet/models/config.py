@@ -45,6 +45,13 @@ SMOKE_FIELDS: dict[str, Any] = dict(
 )
 
 
+def variant_modules(name: str) -> Variant:
+    """The paper row `name` (its modules and paper backbone); an unknown name is an error."""
+    if name not in VARIANTS:
+        raise PosenetError(f"unknown variant {name!r}; choose one of {', '.join(VARIANTS)}")
+    return VARIANTS[name]
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """Architecture of a GDR-Net / GAP-GDRNet model; defaults are the paper's full GAP-GDRNet.
@@ -99,9 +106,7 @@ class ModelConfig:
         failed = [message for ok, message in rules if not ok]
         if failed:
             raise PosenetError("invalid ModelConfig: " + "; ".join(failed))
-        if self.variant not in VARIANTS:
-            raise PosenetError(f"unknown variant {self.variant!r}; choose one of {', '.join(VARIANTS)}")
-        modules = VARIANTS[self.variant]
+        modules = variant_modules(self.variant)
         if (self.ggca, self.mecs, self.pgsa) != (modules.ggca, modules.mecs, modules.pgsa):
             raise PosenetError(
                 f"ggca={self.ggca}, mecs={self.mecs}, pgsa={self.pgsa} is not variant {self.variant!r} "
@@ -132,11 +137,10 @@ class ModelConfig:
 
 def _preset_fields(variant: str, preset: str) -> dict[str, Any]:
     """The fields `preset` sets for paper variant `variant` (the rest keep the paper's defaults)."""
-    if variant not in VARIANTS:
-        raise PosenetError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
+    modules = variant_modules(variant)
     if preset not in PRESETS:
         raise PosenetError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
-    fields = {"variant": variant, **VARIANTS[variant]._asdict()}
+    fields = {"variant": variant, **modules._asdict()}
     return {**fields, **SMOKE_FIELDS} if preset == "smoke" else fields
 
 
