@@ -155,7 +155,8 @@ def eval_cmd(
     obj_id: int | None,
     bop_csv: Path | None,
 ) -> None:
-    """Rotation/translation error, ADD@0.02 m, ADD@0.1d, ADD-S@0.1d, MSSD, ESA score and batch-1 latency.
+    """Rotation/translation error, ADD@0.02 m, ADD@0.1d (and what the rotation and the translation each
+    score alone), ADD-S@0.1d, MSSD, ESA score and batch-1 latency.
 
     For an object with symmetries (models_info), ADD is ADD-S and the rotation error is also given as
     the smallest over the symmetric poses of the ground truth.
@@ -181,6 +182,8 @@ def eval_cmd(
         ["translation error (m)", f"{s['te_m']:.4f}"],
         [f"{add}@0.02m (%)", f"{100 * s['add_0.02m']:.2f}"],
         [f"{add}@0.1d (%)", f"{100 * s['add_0.1d']:.2f}"],
+        ["  ADD@0.1d of the rotation alone, at GT t (%)", f"{100 * s['add_rot_0.1d']:.2f}"],
+        ["  ADD@0.1d of the translation alone, at GT R (%)", f"{100 * s['te_0.1d']:.2f}"],
         ["ADD-S@0.1d (%)", f"{100 * s['adds_0.1d']:.2f}"],
         ["MSSD@0.1d (%)", f"{100 * s['mssd_0.1d']:.2f}"],
         ["AR_MSSD (%)", f"{100 * s['ar_mssd']:.2f}"],

@@ -41,6 +41,11 @@ def _transform(R: Tensor, t: Tensor, points: Tensor) -> Tensor:
     return points @ R.transpose(-1, -2) + t[..., None, :]
 
 
+def depth_error_rel(t_pred: Tensor, t_gt: Tensor) -> Tensor:
+    """|t_z - t_z_gt| / t_z_gt: the depth error as a share of the depth (what scale in pixels fixes)."""
+    return (t_pred[..., 2] - t_gt[..., 2]).abs() / t_gt[..., 2]
+
+
 def add_error(R_pred: Tensor, t_pred: Tensor, R_gt: Tensor, t_gt: Tensor, points: Tensor) -> Tensor:
     """ADD: mean distance between corresponding model points under the two poses."""
     return (_transform(R_pred, t_pred, points) - _transform(R_gt, t_gt, points)).norm(dim=-1).mean(-1)
@@ -103,10 +108,13 @@ def sample_errors(
     vertices: Tensor,
     symmetries: Tensor,
 ) -> dict[str, Tensor]:
-    """Every per-sample error, shape (B,) each: re_deg, re_sym_deg, te_m, add_m, adds_m, mssd_m, esa.
+    """Every per-sample error, shape (B,) each: re_deg, re_sym_deg, te_m, tz_rel, add_m, add_rot_m, adds_m,
+    mssd_m, esa.
 
     ADD and ADD-S use the surface `points`, MSSD the model `vertices`; re_sym_deg and MSSD the object's
-    (K, 4, 4) `symmetries` (K = 1: re_sym_deg = re_deg).
+    (K, 4, 4) `symmetries` (K = 1: re_sym_deg = re_deg). ADD splits into its two causes: add_rot_m is the
+    ADD of the predicted rotation at the GT translation, and te_m is the ADD of the predicted translation
+    at the GT rotation (every point moves by the same offset).
     """
     args = [x.double() for x in (R_pred, t_pred, R_gt, t_gt)]
     pts, verts, syms = points.double(), vertices.double(), symmetries.double()
@@ -114,7 +122,9 @@ def sample_errors(
         "re_deg": rotation_error_deg(args[0], args[2]),
         "re_sym_deg": rotation_error_sym_deg(args[0], args[2], args[3], syms),
         "te_m": translation_error(args[1], args[3]),
+        "tz_rel": depth_error_rel(args[1], args[3]),
         "add_m": add_error(*args, pts),
+        "add_rot_m": add_error(args[0], args[3], args[2], args[3], pts),
         "adds_m": adds_error(*args, pts),
         "mssd_m": mssd_error(*args, verts, syms),
         "esa": esa_score(*args),
@@ -129,8 +139,9 @@ def headline_add(symmetric: bool) -> tuple[str, str]:
 
 def summarise(errors: dict[str, list[float]], diameter: float, symmetric: bool) -> dict[str, Any]:
     """Dataset summary: mean re_deg, re_sym_deg, te_m, esa; recalls in [0, 1]: add_0.02m and add_0.1d of
-    the headline ADD (`add_metric`, see headline_add), adds_0.1d, mssd_0.1d, and BOP19's ar_mssd (MSSD's
-    recall averaged over MSSD_THRESHOLDS).
+    the headline ADD (`add_metric`, see headline_add), adds_0.1d, mssd_0.1d, BOP19's ar_mssd (MSSD's
+    recall averaged over MSSD_THRESHOLDS), and ADD@0.1d of the rotation alone (add_rot_0.1d, at the GT
+    translation) and of the translation alone (te_0.1d, at the GT rotation): which of the two fails ADD.
 
     An instance without an estimate (a missed detection) has infinite errors: it fails every recall, and
     the means are over the estimated instances only (nan when there is none).
@@ -156,6 +167,8 @@ def summarise(errors: dict[str, list[float]], diameter: float, symmetric: bool) 
         "add_0.1d": recall(add_key, 0.1 * diameter),
         "adds_0.1d": recall("adds_m", 0.1 * diameter),
         "mssd_0.1d": recall("mssd_m", 0.1 * diameter),
+        "add_rot_0.1d": recall("add_rot_m", 0.1 * diameter),
+        "te_0.1d": recall("te_m", 0.1 * diameter),
         "ar_mssd": sum(recall("mssd_m", f * diameter) for f in MSSD_THRESHOLDS) / len(MSSD_THRESHOLDS),
         "esa": mean("esa"),
     }

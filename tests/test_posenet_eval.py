@@ -21,7 +21,9 @@ BATCH_TOLERANCE = {
     "re_deg": 1e-2,
     "re_sym_deg": 1e-2,
     "te_m": 1e-5,
+    "tz_rel": 1e-5,
     "add_m": 1e-5,
+    "add_rot_m": 1e-5,
     "adds_m": 1e-5,
     "mssd_m": 1e-5,
     "esa": 1e-3,
@@ -58,6 +60,7 @@ def test_eval_writes_summary_and_predictions(dataset_dir: Path, checkpoint: Path
     res = CliRunner().invoke(main, [str(a) for a in args])
     assert res.exit_code == 0, res.output
     assert "ADD@0.02m (%)" in res.output and "latency, batch 1 (ms)" in res.output
+    assert "of the rotation alone" in res.output and "of the translation alone" in res.output
     summary = json.loads(out.read_text())
     for key in ("re_deg", "te_m", "add_0.02m", "add_0.1d", "adds_0.1d", "esa", "latency_ms"):
         assert isinstance(summary[key], float), key

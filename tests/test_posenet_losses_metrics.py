@@ -142,3 +142,21 @@ def test_summary_keys_and_recalls() -> None:
     assert {"re_deg", "te_m", "add_0.02m", "add_0.1d", "adds_0.1d", "esa"} <= set(s)
     assert s["add_0.02m"] == 0.75 and s["add_0.1d"] == 0.75
     assert math.isclose(s["te_m"], (0.01 + 0.019 + 0.05) / 4)
+
+
+def test_add_splits_into_its_rotation_and_translation_causes() -> None:
+    pts = torch.rand(200, 3, generator=torch.Generator().manual_seed(1), dtype=torch.float64) - 0.5
+    R, t = rot_z(20.0)[None], torch.tensor([[0.1, -0.2, 2.0]], dtype=torch.float64)
+    sym = torch.eye(4, dtype=torch.float64)[None]
+    # a translation error alone: every point moves by it, so ADD = te and the rotation's share is 0
+    shifted = sample_errors(R, t + torch.tensor([[0.03, 0.0, 0.4]], dtype=torch.float64), R, t, pts, pts, sym)
+    assert float(shifted["add_rot_m"]) == 0.0
+    assert math.isclose(float(shifted["add_m"]), float(shifted["te_m"]), rel_tol=1e-12)
+    assert math.isclose(float(shifted["tz_rel"]), 0.4 / 2.0, rel_tol=1e-12)
+    # a rotation error alone: the rotation's share is the whole ADD, translation and depth errors 0
+    turned = sample_errors(rot_z(80.0)[None], t, R, t, pts, pts, sym)
+    assert float(turned["te_m"]) == 0.0 and float(turned["tz_rel"]) == 0.0
+    assert math.isclose(float(turned["add_rot_m"]), float(turned["add_m"]), rel_tol=1e-12)
+    assert float(turned["add_m"]) > 0.15  # beyond 0.1 of the diameter 1 below
+    s = summarise({k: shifted[k].tolist() + turned[k].tolist() for k in shifted}, 1.0, False)
+    assert s["add_rot_0.1d"] == 0.5 and s["te_0.1d"] == 0.5 and s["add_0.1d"] == 0.0
