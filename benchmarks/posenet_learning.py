@@ -1,10 +1,15 @@
 """posenet learning benchmark: train a config on an scgen dataset, following the held-out test split.
 
 Reproduce the README figures (renders 1000 samples with Mitsuba at 320x240, seed 7, into OUT/data, then
-trains the `smoke` config for its whole schedule into OUT/run; measured on 2 idle cores: about 6 min of
-rendering, 25 min of training and 2 min of evaluation):
+trains the `smoke` config for its whole schedule into OUT/run-gdrnet; measured on 2 idle cores: about 6 min
+of rendering, 25-45 min of training, the machine's speed drifting, and 2 min of evaluation):
 
     python benchmarks/posenet_learning.py --out /tmp/learn
+
+GDR-Net against GAP-GDRNet on the same set (issue 20 item 4; each variant trains in turn, into
+OUT/run-VARIANT):
+
+    python benchmarks/posenet_learning.py --out /tmp/learn --variant gdrnet --variant gap-gdrnet
 
 Training runs in chunks: train(max_steps=k) up to each evaluation step k, then (resume=True) on to the
 next; the training code guarantees that the resumed run equals an uninterrupted one. After each chunk
@@ -13,15 +18,18 @@ posenet.evaluate.evaluate, which gives the learning curve. With --steps shorter 
 schedule the learning-rate schedule is still the config's (warmup + flat + cosine over all its
 epochs): the run stops part-way through it, before (or during) the cosine decay.
 
-Prints: the curve (one line per evaluation), the final checkpoint's rotation error (mean, median),
-translation error, ADD@0.02 m, ADD@0.1d and instance counts on the train and test splits, ADD@0.02 m
-per factor group of the test split (the groups `scgen stats --sample-groups` draws, evaluated by
-posenet.evaluate.by_factor, the layout of `posenet eval --by-factor`), and the training wall time and
-samples/s. Writes OUT/learning_curve.png (loss terms; test recalls and rotation error against steps)
-and OUT/learning.json (every figure printed, plus the curve points).
+Prints, per variant: the curve (one line per evaluation), the final checkpoint's rotation error (mean,
+median), share of turned poses, translation error, ADD@0.02 m, ADD@0.1d split into its two causes (the
+ADD@0.1d of the predicted rotation at the GT translation and of the predicted translation at the GT
+rotation), the median depth error as a share of the depth, and instance counts on the train and test
+splits, the floors of issue 20, and the training wall time and samples/s. Then ADD@0.02 m per
+factor group of the test split, one column per variant (the groups `scgen stats --sample-groups` draws,
+evaluated by posenet.evaluate.by_factor, the layout of `posenet eval --by-factor` and of the paper's
+Table 5). Writes OUT/learning_curve-VARIANT.png (loss terms; test recalls and rotation error against
+steps) and OUT/learning.json (every figure printed, plus the curve points).
 
-Re-running with the same --out reuses (resumes) the rendered dataset in OUT/data; OUT/run must not hold
-a run already (pass --overwrite to delete it first).
+Re-running with the same --out reuses (resumes) the rendered dataset in OUT/data; an OUT/run-VARIANT that
+holds a run already is refused (pass --overwrite to delete it first).
 """
 
 from __future__ import annotations
@@ -77,7 +85,10 @@ def positive(text: str) -> int:
 def parse_args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
-        "--out", type=Path, required=True, help="Output folder: data/ (if rendered), run/, PNG and JSON."
+        "--out",
+        type=Path,
+        required=True,
+        help="Output folder: data/ (if rendered), run-VARIANT/, PNGs and JSON.",
     )
     ap.add_argument(
         "--data", type=Path, default=None, help="Existing scgen dataset (default: render one into OUT/data)."
@@ -95,7 +106,13 @@ def parse_args() -> argparse.Namespace:
     render.add_argument("--workers", type=positive, default=2, help="Render worker processes [2].")
     train_g = ap.add_argument_group("training")
     train_g.add_argument("--config", default="smoke", help="paper | smoke | a YAML/TOML config file [smoke].")
-    train_g.add_argument("--variant", default=None, help="Override the config's variant (e.g. gap-gdrnet).")
+    train_g.add_argument(
+        "--variant",
+        action="append",
+        default=None,
+        help="Variant to train instead of the config's; repeat it to train several on the same set and "
+        "compare them (--variant gdrnet --variant gap-gdrnet).",
+    )
     train_g.add_argument(
         "--epochs", type=positive, default=None, help="Override optim.epochs (this sets the lr schedule)."
     )
@@ -156,10 +173,10 @@ def schedule(data: Path, cfg: TrainConfig) -> tuple[int, int, int]:
 
 
 def summary(result: EvalResult) -> dict[str, Any]:
-    """summarise()'s figures plus medians of the rotation and translation errors and the share of
-    turned poses (rotation error beyond TURNED_DEG)."""
+    """summarise()'s figures plus medians of the rotation, translation and relative depth errors and the
+    share of turned poses (rotation error beyond TURNED_DEG)."""
     s = dict(result.summary)
-    for key in ("re_deg", "te_m"):
+    for key in ("re_deg", "te_m", "tz_rel"):
         values = [r[key] for r in result.records]
         s[f"{key}_median"] = statistics.median(values) if values else math.nan
     errors = [r["re_deg"] for r in result.records]
@@ -241,21 +258,41 @@ def pct(v: float | None) -> str:
     return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:.2f}"
 
 
-def run(args: argparse.Namespace) -> None:
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    run_dir = out / "run"
-    if (run_dir / LAST).exists():
-        if not args.overwrite:
-            raise PosenetError(f"{run_dir} already holds a run; pass --overwrite or choose another --out")
-        shutil.rmtree(run_dir)
-    data = get_dataset(args)
-
-    cfg = load_config(args.config, variant=args.variant, epochs=args.epochs)
+def variant_configs(args: argparse.Namespace) -> list[TrainConfig]:
+    """One TrainConfig per --variant (the config's own variant when none is named), each validated."""
+    cfgs = [load_config(args.config, variant=v, epochs=args.epochs) for v in (args.variant or [None])]
+    names = [c.variant for c in cfgs]
+    if len(set(names)) < len(names):
+        raise PosenetError(f"--variant names a variant twice: {', '.join(names)}")
     if args.loader_workers is not None:
         if args.loader_workers < 0:
             raise PosenetError("--loader-workers must be >= 0")
-        cfg.data.workers = args.loader_workers
+        for c in cfgs:
+            c.data.workers = args.loader_workers
+    return cfgs
+
+
+def run_folder(out: Path, cfg: TrainConfig) -> Path:
+    """OUT/run-VARIANT: where the benchmark trains that variant."""
+    return out / f"run-{cfg.variant}"
+
+
+def clear_run_folders(args: argparse.Namespace, cfgs: list[TrainConfig]) -> None:
+    """Refuse (or with --overwrite delete) every variant's run folder that holds a run, before any
+    training, so that a second variant never fails after the first has trained."""
+    for cfg in cfgs:
+        run_dir = run_folder(args.out, cfg)
+        if (run_dir / LAST).exists():
+            if not args.overwrite:
+                raise PosenetError(f"{run_dir} already holds a run; pass --overwrite or choose another --out")
+            shutil.rmtree(run_dir)
+
+
+def train_and_follow(args: argparse.Namespace, data: Path, cfg: TrainConfig) -> dict[str, Any]:
+    """Train one variant into OUT/run-VARIANT in chunks, evaluating the test split after each; then the
+    final checkpoint on the train split. Prints the curve, the final table and the floors; writes the
+    variant's learning-curve PNG. Returns everything learning.json records of the run."""
+    run_dir = run_folder(args.out, cfg)
     n_train, per_epoch, total = schedule(data, cfg)
     o = cfg.optim
     steps = total if args.steps is None else args.steps
@@ -265,7 +302,7 @@ def run(args: argparse.Namespace) -> None:
     every = args.eval_every or max(1, math.ceil(steps / CURVE_POINTS))
     points = [*range(every, steps, every), steps]
     print(
-        f"training: {cfg.variant} ({args.config} config), {n_train} training instances, batch "
+        f"\ntraining: {cfg.variant} ({args.config} config), {n_train} training instances, batch "
         f"{o.batch_size}, {per_epoch} steps/epoch; {steps} of the schedule's {total} steps "
         f"({o.epochs} epochs), test evaluation at steps {', '.join(map(str, points))}"
     )
@@ -299,10 +336,6 @@ def run(args: argparse.Namespace) -> None:
     tic = time.perf_counter()
     final = {"train": summary(evaluate(data, ckpt, "train", workers=args.eval_workers))}
     final["test"] = summary(final_test)  # the last curve point: the final checkpoint
-    groups = sample_groups(data, "test", args.groups_n, args.groups_seed)
-    groups_file = out / f"groups_test_n{args.groups_n}_s{args.groups_seed}.json"
-    atomic_write_text(groups_file, json.dumps(groups, indent=1) + "\n")
-    factors = by_factor(data, [ckpt], groups_file, "test", workers=args.eval_workers)
     eval_s += time.perf_counter() - tic
 
     rows_log = [json.loads(ln) for ln in (run_dir / LOG_FILE).read_text().splitlines()]
@@ -323,14 +356,68 @@ def run(args: argparse.Namespace) -> None:
                 ["translation error, median (m)", f"{tr['te_m_median']:.4f}", f"{te['te_m_median']:.4f}"],
                 ["ADD@0.02m (%)", pct(tr["add_0.02m"]), pct(te["add_0.02m"])],
                 ["ADD@0.1d (%)", pct(tr["add_0.1d"]), pct(te["add_0.1d"])],
+                ["  of the rotation alone, at GT t (%)", pct(tr["add_rot_0.1d"]), pct(te["add_rot_0.1d"])],
+                ["  of the translation alone, at GT R (%)", pct(tr["te_0.1d"]), pct(te["te_0.1d"])],
+                ["depth error, median (% of depth)", pct(tr["tz_rel_median"]), pct(te["tz_rel_median"])],
             ],
         )
     )
     print("floors (issue 20): " + "; ".join(floor_lines(final)))
     kept = "" if cfg.data.min_visib_fract == 0 else f" with visible fraction > {cfg.data.min_visib_fract}"
     print(f"(instances: every one with a visible pixel; training used {n_train} train instances{kept})")
+    print(
+        f"training: {steps} steps x batch {o.batch_size} = {samples} samples in {train_s:.1f} s wall "
+        f"({samples / train_s:.1f} samples/s, including {len(points) - 1} restart(s) for evaluation); "
+        f"median step {1000 * step_s:.0f} ms ({o.batch_size / step_s:.1f} samples/s)"
+    )
+    print(f"evaluation: {eval_s:.1f} s ({len(points)} test evaluations and the train split)")
+
+    title = (
+        f"{final_test.variant} ({args.config} config) on {data.name}: {n_train} training instances, "
+        f"batch {o.batch_size}, {steps}" + (f" of {total}" if steps < total else "") + " steps"
+    )
+    png = args.out / f"learning_curve-{cfg.variant}.png"
+    plot(png, rows_log, curve, title)
+    print(f"wrote {png}")
+    return {
+        "run": str(run_dir),
+        "ckpt": str(ckpt),
+        "config": cfg.to_dict(),
+        "variant": final_test.variant,
+        "train_instances": n_train,
+        "steps_per_epoch": per_epoch,
+        "schedule_steps": total,
+        "steps": steps,
+        "eval_every": every,
+        "curve": curve,
+        "final": final,
+        "timing": {
+            "train_wall_s": train_s,
+            "train_samples_per_s": samples / train_s,
+            "median_step_s": step_s,
+            "median_step_samples_per_s": o.batch_size / step_s,
+            "eval_s": eval_s,
+        },
+    }
+
+
+def run(args: argparse.Namespace) -> None:
+    args.out.mkdir(parents=True, exist_ok=True)
+    cfgs = variant_configs(args)  # every --variant checked before anything is rendered or trained
+    clear_run_folders(args, cfgs)
+    data = get_dataset(args)
+    runs = [train_and_follow(args, data, cfg) for cfg in cfgs]
+
+    groups = sample_groups(data, "test", args.groups_n, args.groups_seed)
+    groups_file = args.out / f"groups_test_n{args.groups_n}_s{args.groups_seed}.json"
+    atomic_write_text(groups_file, json.dumps(groups, indent=1) + "\n")
+    tic = time.perf_counter()
+    factors = by_factor(data, [Path(r["ckpt"]) for r in runs], groups_file, "test", workers=args.eval_workers)
     cols = factors["columns"]
-    print(f"\ntest split by factor group ({args.groups_n} per group at most, seed {args.groups_seed}):")
+    print(
+        f"\ntest split by factor group ({args.groups_n} per group at most, seed {args.groups_seed}; "
+        f"{time.perf_counter() - tic:.0f} s), one column per variant:"
+    )
     print(
         format_table(
             ["ADD@0.02m (%)", "n", *cols],
@@ -341,43 +428,9 @@ def run(args: argparse.Namespace) -> None:
             ],
         )
     )
-    print(
-        f"\ntraining: {steps} steps x batch {o.batch_size} = {samples} samples in {train_s:.1f} s wall "
-        f"({samples / train_s:.1f} samples/s, including {len(points) - 1} restart(s) for evaluation); "
-        f"median step {1000 * step_s:.0f} ms ({o.batch_size / step_s:.1f} samples/s)"
-    )
-    print(f"evaluation: {eval_s:.1f} s in all ({len(points)} test evaluations, train split, factor groups)")
-
-    title = (
-        f"{final_test.variant} ({args.config} config) on {data.name}: {n_train} training instances, "
-        f"batch {o.batch_size}, {steps}" + (f" of {total}" if steps < total else "") + " steps"
-    )
-    png = out / "learning_curve.png"
-    plot(png, rows_log, curve, title)
-    result = {
-        "data": str(data),
-        "run": str(run_dir),
-        "config": cfg.to_dict(),
-        "variant": final_test.variant,
-        "train_instances": n_train,
-        "steps_per_epoch": per_epoch,
-        "schedule_steps": total,
-        "steps": steps,
-        "eval_every": every,
-        "curve": curve,
-        "final": final,
-        "by_factor": factors,
-        "groups_file": str(groups_file),
-        "timing": {
-            "train_wall_s": train_s,
-            "train_samples_per_s": samples / train_s,
-            "median_step_s": step_s,
-            "median_step_samples_per_s": o.batch_size / step_s,
-            "eval_s": eval_s,
-        },
-    }
-    atomic_write_text(out / "learning.json", json.dumps(result, indent=1) + "\n")
-    print(f"wrote {png} and {out / 'learning.json'}")
+    result = {"data": str(data), "runs": runs, "by_factor": factors, "groups_file": str(groups_file)}
+    atomic_write_text(args.out / "learning.json", json.dumps(result, indent=1) + "\n")
+    print(f"wrote {args.out / 'learning.json'}")
 
 
 def main() -> None:
