@@ -37,6 +37,7 @@ from scgen.bop_dataset import BopDataset, BopImage, open_bop_dataset, read_model
 from scgen.dataset import dumps
 from scgen.errors import ScgenError
 from scgen.exr import encode_xyz_exr
+from scgen.parent_watch import exit_with_parent
 from scgen.render import raycast
 from scgen.writer import encode_png
 
@@ -177,6 +178,11 @@ def _init(context: _Context) -> None:
     raycast.start(context.threads)
 
 
+def _init_worker(context: _Context) -> None:
+    exit_with_parent()
+    _init(context)
+
+
 def _annotate(image: BopImage) -> tuple[int, VisibDisagreement]:
     """Label and write one image; returns its instance count and its disagreement with its own masks."""
     assert _context is not None
@@ -218,7 +224,7 @@ def run_annotate(job: AnnotateJob, progress: bool = True) -> dict[str, Any]:
                 bar.update(1)
         elif todo:
             workers = min(job.workers, len(todo))
-            pool = ProcessPoolExecutor(workers, mp.get_context("spawn"), _init, (context,))
+            pool = ProcessPoolExecutor(workers, mp.get_context("spawn"), _init_worker, (context,))
             try:
                 futures = {pool.submit(_annotate, image): image for image in todo}
                 for fut in as_completed(futures):

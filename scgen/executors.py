@@ -13,6 +13,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 
 from scgen.errors import ScgenError
+from scgen.parent_watch import exit_with_parent
 from scgen.worker import Done, SampleWorker, Task, WorkerSettings
 
 MAX_ATTEMPTS = 3  # a sample is tried at most this often before the run stops
@@ -21,6 +22,7 @@ _worker: SampleWorker | None = None
 
 def _init_process(settings: WorkerSettings) -> None:
     global _worker
+    exit_with_parent()
     _worker = SampleWorker(settings)
 
 

@@ -66,31 +66,46 @@ def test_two_workers_and_merged_shards_equal_one_worker(reference: Path, tmp_pat
     assert_same_dataset(reference, tmp_path / "merged")
 
 
+def start_render(out: Path, workers: int) -> subprocess.Popen:
+    """`scgen render` of the COMMON settings as a process of its own (its own session, quiet)."""
+    cmd = [sys.executable, "-m", "scgen.cli", "render", "--out", str(out), *COMMON, "--workers", str(workers)]
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    return subprocess.Popen([*cmd, "--quiet"], start_new_session=True, **quiet)
+
+
+def wait_for_samples(out: Path, count: int) -> None:
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(out.glob("*/*/records/*.json"))) < count:
+        time.sleep(0.05)
+
+
 def test_kill_9_then_resume_equals_clean_run(reference: Path, tmp_path: Path):
     out = tmp_path / "killed"
-    cmd = [
-        sys.executable,
-        "-m",
-        "scgen.cli",
-        "render",
-        "--out",
-        str(out),
-        *COMMON,
-        "--workers",
-        "2",
-        "--quiet",
-    ]
-    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
-    proc = subprocess.Popen(cmd, start_new_session=True, **quiet)
-    deadline = time.time() + 120
-    while time.time() < deadline and len(list(out.glob("*/*/records/*.json"))) < 3:
-        time.sleep(0.05)
+    proc = start_render(out, workers=2)
+    wait_for_samples(out, 3)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     n_before = len(list(out.glob("*/*/records/*.json")))
     assert 0 < n_before < N, "the kill must land mid-run"
     render(out, "--workers", "2")
     assert_same_dataset(reference, out)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_workers_end_with_a_killed_render_process(tmp_path: Path, sig: signal.Signals):
+    """Only the main process is signalled (as a job scheduler or `kill PID` does): its renderers must not
+    outlive it."""
+    out = tmp_path / "orphans"
+    proc = start_render(out, workers=2)
+    wait_for_samples(out, 1)
+    workers = [c for c in psutil.Process(proc.pid).children() if "spawn_main" in " ".join(c.cmdline())]
+    assert len(workers) == 2
+    proc.send_signal(sig)
+    proc.wait()
+    _, alive = psutil.wait_procs(workers, timeout=15)
+    for p in alive:
+        p.kill()
+    assert alive == [], "worker processes outlived the killed render"
 
 
 def test_a_worker_killed_mid_run_is_replaced_and_its_sample_retried(reference: Path, tmp_path: Path):
