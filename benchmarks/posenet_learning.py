@@ -49,8 +49,9 @@ import numpy as np
 from posenet.config import TrainConfig, load_config
 from posenet.data import open_split
 from posenet.errors import PosenetError
-from posenet.evaluate import EvalResult, by_factor, evaluate, format_table
+from posenet.evaluate import by_factor, evaluate, format_table
 from posenet.losses import LOSS_TERMS
+from posenet.metrics import TURNED_DEG
 from posenet.train import LAST, LOG_FILE, steps_per_epoch, train
 from scgen.atomic import atomic_write_text
 from scgen.errors import ScgenError
@@ -58,7 +59,6 @@ from scgen.runner import RenderJob, run_render
 from scgen.stats import sample_groups
 
 CURVE_POINTS = 8  # default number of evaluations over the run
-TURNED_DEG = 135.0  # a rotation error beyond this is a turned pose (the target's near-D2 symmetry)
 # issue 20's floors for the CPU recipe: (split, figure, bound, "max" | "min")
 FLOORS = (
     ("test", "re_deg_median", 20.0, "max"),
@@ -170,18 +170,6 @@ def schedule(data: Path, cfg: TrainConfig) -> tuple[int, int, int]:
     ds = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
     per_epoch = steps_per_epoch(len(ds), o)
     return len(ds), per_epoch, o.epochs * per_epoch
-
-
-def summary(result: EvalResult) -> dict[str, Any]:
-    """summarise()'s figures plus medians of the rotation, translation and relative depth errors and the
-    share of turned poses (rotation error beyond TURNED_DEG)."""
-    s = dict(result.summary)
-    for key in ("re_deg", "te_m", "tz_rel"):
-        values = [r[key] for r in result.records]
-        s[f"{key}_median"] = statistics.median(values) if values else math.nan
-    errors = [r["re_deg"] for r in result.records]
-    s["turned"] = sum(e > TURNED_DEG for e in errors) / len(errors) if errors else math.nan
-    return s
 
 
 def floor_lines(final: dict[str, dict[str, Any]]) -> list[str]:
@@ -323,7 +311,7 @@ def train_and_follow(args: argparse.Namespace, data: Path, cfg: TrainConfig) -> 
         tic = time.perf_counter()
         final_test = evaluate(data, ckpt, "test", workers=args.eval_workers)
         eval_s += time.perf_counter() - tic
-        s = summary(final_test)
+        s = final_test.summary
         curve.append({"step": k, "epoch": k / per_epoch, "train_s": train_s, **s})
         print(
             f"step {k:>6}/{steps} (epoch {k / per_epoch:6.2f}): test ADD@0.1d {pct(s['add_0.1d']):>6} %, "
@@ -334,8 +322,8 @@ def train_and_follow(args: argparse.Namespace, data: Path, cfg: TrainConfig) -> 
 
     assert final_test is not None  # points is never empty
     tic = time.perf_counter()
-    final = {"train": summary(evaluate(data, ckpt, "train", workers=args.eval_workers))}
-    final["test"] = summary(final_test)  # the last curve point: the final checkpoint
+    final = {"train": evaluate(data, ckpt, "train", workers=args.eval_workers).summary}
+    final["test"] = final_test.summary  # the last curve point: the final checkpoint
     eval_s += time.perf_counter() - tic
 
     rows_log = [json.loads(ln) for ln in (run_dir / LOG_FILE).read_text().splitlines()]

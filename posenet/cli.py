@@ -20,6 +20,7 @@ from posenet.detector import load_detector_config
 from posenet.errors import PosenetError
 from posenet.evaluate import BATCH_SIZE, bop_results_csv, evaluate, format_table, json_record
 from posenet.evaluate import by_factor as run_by_factor
+from posenet.metrics import TURNED_DEG
 from posenet.models import VARIANTS
 from posenet.train import train as run_train
 from posenet.train_detector import train_detector
@@ -178,8 +179,12 @@ def eval_cmd(
     rows = [
         ["samples", f"{s['n']}"],
         ["rotation error (deg)", f"{s['re_deg']:.3f}"],
+        ["rotation error, median (deg)", f"{s['re_deg_median']:.3f}"],
+        [f"turned poses, rotation error > {TURNED_DEG:.0f} deg (%)", f"{100 * s['turned']:.2f}"],
         ["rotation error, symmetry-aware (deg)", f"{s['re_sym_deg']:.3f}"],
         ["translation error (m)", f"{s['te_m']:.4f}"],
+        ["translation error, median (m)", f"{s['te_m_median']:.4f}"],
+        ["depth error, median (% of depth)", f"{100 * s['tz_rel_median']:.2f}"],
         [f"{add}@0.02m (%)", f"{100 * s['add_0.02m']:.2f}"],
         [f"{add}@0.1d (%)", f"{100 * s['add_0.1d']:.2f}"],
         ["  ADD@0.1d of the rotation alone, at GT t (%)", f"{100 * s['add_rot_0.1d']:.2f}"],

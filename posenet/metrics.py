@@ -8,6 +8,7 @@ thresholds applied independently to each term, as in SPNv2.
 from __future__ import annotations
 
 import math
+import statistics
 from typing import Any
 
 import torch
@@ -15,6 +16,7 @@ from torch import Tensor
 
 from posenet.geometry import symmetric_poses
 
+TURNED_DEG = 135.0  # a rotation error beyond this is a turned pose (the bundled target's near-D2 symmetry)
 ESA_THETA_Q_DEG = 0.169  # rotation errors below this count as 0 (SPEC2021 / SPEED+ HIL)
 ESA_THETA_T = 2.173e-3  # normalised translation errors below this (2.173 mm per metre) count as 0
 MSSD_THRESHOLDS = tuple(0.05 * k for k in range(1, 11))  # BOP19's AR_MSSD: 0.05..0.5 of the diameter
@@ -141,10 +143,12 @@ def summarise(errors: dict[str, list[float]], diameter: float, symmetric: bool) 
     """Dataset summary: mean re_deg, re_sym_deg, te_m, esa; recalls in [0, 1]: add_0.02m and add_0.1d of
     the headline ADD (`add_metric`, see headline_add), adds_0.1d, mssd_0.1d, BOP19's ar_mssd (MSSD's
     recall averaged over MSSD_THRESHOLDS), and ADD@0.1d of the rotation alone (add_rot_0.1d, at the GT
-    translation) and of the translation alone (te_0.1d, at the GT rotation): which of the two fails ADD.
+    translation) and of the translation alone (te_0.1d, at the GT rotation): which of the two fails ADD;
+    medians of the rotation, translation and relative depth errors (re_deg_median, te_m_median,
+    tz_rel_median) and the share of turned poses (`turned`: rotation error beyond TURNED_DEG).
 
     An instance without an estimate (a missed detection) has infinite errors: it fails every recall, and
-    the means are over the estimated instances only (nan when there is none).
+    the means, medians and the turned share are over the estimated instances only (nan when there is none).
     """
     n = len(errors["re_deg"])
     add_key, add_name = headline_add(symmetric)
@@ -152,9 +156,18 @@ def summarise(errors: dict[str, list[float]], diameter: float, symmetric: bool) 
     def recall(key: str, thr: float) -> float:
         return sum(e < thr for e in errors[key]) / n if n else math.nan
 
+    def finite(key: str) -> list[float]:
+        return [e for e in errors[key] if math.isfinite(e)]
+
     def mean(key: str) -> float:
-        finite = [e for e in errors[key] if math.isfinite(e)]
-        return sum(finite) / len(finite) if finite else math.nan
+        values = finite(key)
+        return sum(values) / len(values) if values else math.nan
+
+    def median(key: str) -> float:
+        values = finite(key)
+        return statistics.median(values) if values else math.nan
+
+    rotations = finite("re_deg")
 
     return {
         "n": n,
@@ -171,4 +184,8 @@ def summarise(errors: dict[str, list[float]], diameter: float, symmetric: bool) 
         "te_0.1d": recall("te_m", 0.1 * diameter),
         "ar_mssd": sum(recall("mssd_m", f * diameter) for f in MSSD_THRESHOLDS) / len(MSSD_THRESHOLDS),
         "esa": mean("esa"),
+        "re_deg_median": median("re_deg"),
+        "te_m_median": median("te_m"),
+        "tz_rel_median": median("tz_rel"),
+        "turned": sum(e > TURNED_DEG for e in rotations) / len(rotations) if rotations else math.nan,
     }

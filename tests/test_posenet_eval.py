@@ -28,6 +28,8 @@ BATCH_TOLERANCE = {
     "mssd_m": 1e-5,
     "esa": 1e-3,
 }
+# the summary's medians round as the records they are taken of
+SUMMARY_TOLERANCE = {**BATCH_TOLERANCE, "re_deg_median": 1e-2, "te_m_median": 1e-5, "tz_rel_median": 1e-5}
 
 
 @pytest.fixture(scope="module")
@@ -61,6 +63,7 @@ def test_eval_writes_summary_and_predictions(dataset_dir: Path, checkpoint: Path
     assert res.exit_code == 0, res.output
     assert "ADD@0.02m (%)" in res.output and "latency, batch 1 (ms)" in res.output
     assert "of the rotation alone" in res.output and "of the translation alone" in res.output
+    assert "rotation error, median (deg)" in res.output and "turned poses" in res.output
     summary = json.loads(out.read_text())
     for key in ("re_deg", "te_m", "add_0.02m", "add_0.1d", "adds_0.1d", "esa", "latency_ms"):
         assert isinstance(summary[key], float), key
@@ -85,7 +88,7 @@ def test_batched_evaluation_gives_the_batch_1_records(dataset_dir: Path, checkpo
     s1, sb = one.summary, batched.summary
     assert sb.keys() == s1.keys() and sb["fps"] == 1000 / sb["latency_ms"]
     for key in s1.keys() - {"latency_ms", "fps"}:
-        assert sb[key] == pytest.approx(s1[key], abs=BATCH_TOLERANCE.get(key, 0.0)), key
+        assert sb[key] == pytest.approx(s1[key], abs=SUMMARY_TOLERANCE.get(key, 0.0)), key
 
 
 def test_by_factor_table_averages_checkpoints_of_one_variant(

@@ -12,6 +12,7 @@ from posenet.geometry import ego_to_allo, mat_to_rot6d, site_encode
 from posenet.losses import PmObject, coord_loss, mask_loss, pm_loss, pose_losses, region_loss
 from posenet.metrics import (
     ESA_THETA_Q_DEG,
+    TURNED_DEG,
     add_error,
     adds_error,
     esa_score,
@@ -142,6 +143,20 @@ def test_summary_keys_and_recalls() -> None:
     assert {"re_deg", "te_m", "add_0.02m", "add_0.1d", "adds_0.1d", "esa"} <= set(s)
     assert s["add_0.02m"] == 0.75 and s["add_0.1d"] == 0.75
     assert math.isclose(s["te_m"], (0.01 + 0.019 + 0.05) / 4)
+
+
+def test_medians_and_turned_share_skip_missed_instances() -> None:
+    R = torch.eye(3, dtype=torch.float64)
+    t = torch.tensor([[0.0, 0.0, 2.0]], dtype=torch.float64)
+    pts = torch.rand(100, 3, dtype=torch.float64) - 0.5
+    sym = torch.eye(4, dtype=torch.float64)[None]
+    angles = [5.0, 30.0, TURNED_DEG + 1.0, 179.0, 100.0]  # median 100, two beyond TURNED_DEG
+    rows = [sample_errors(rot_z(a)[None], t + 0.1 * t, R[None], t, pts, pts, sym) for a in angles]
+    errors = {k: [float(r[k]) for r in rows] + [math.inf] for k in rows[0]}  # and one missed detection
+    s = summarise(errors, diameter=0.2, symmetric=False)
+    assert s["re_deg_median"] == pytest.approx(100.0) and s["turned"] == pytest.approx(2 / 5)
+    assert s["te_m_median"] == pytest.approx(0.2) and s["tz_rel_median"] == pytest.approx(0.1)
+    assert s["n"] == 6
 
 
 def test_add_splits_into_its_rotation_and_translation_causes() -> None:
