@@ -15,12 +15,11 @@ The dataset's own masks and scene_gt_info values are kept (only `xyz_box` is add
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
 import sys
 import time
 from collections import defaultdict
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -37,7 +36,7 @@ from scgen.bop_dataset import BopDataset, BopImage, open_bop_dataset, read_model
 from scgen.dataset import dumps
 from scgen.errors import ScgenError
 from scgen.exr import encode_xyz_exr
-from scgen.parent_watch import exit_with_parent
+from scgen.parent_watch import spawn_pool
 from scgen.render import raycast
 from scgen.writer import encode_png
 
@@ -178,11 +177,6 @@ def _init(context: _Context) -> None:
     raycast.start(context.threads)
 
 
-def _init_worker(context: _Context) -> None:
-    exit_with_parent()
-    _init(context)
-
-
 def _annotate(image: BopImage) -> tuple[int, VisibDisagreement]:
     """Label and write one image; returns its instance count and its disagreement with its own masks."""
     assert _context is not None
@@ -224,7 +218,7 @@ def run_annotate(job: AnnotateJob, progress: bool = True) -> dict[str, Any]:
                 bar.update(1)
         elif todo:
             workers = min(job.workers, len(todo))
-            pool = ProcessPoolExecutor(workers, mp.get_context("spawn"), _init_worker, (context,))
+            pool = spawn_pool(workers, _init, (context,))
             try:
                 futures = {pool.submit(_annotate, image): image for image in todo}
                 for fut in as_completed(futures):

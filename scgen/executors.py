@@ -7,13 +7,12 @@ completions for the progress bar, and retry samples whose worker failed.
 
 from __future__ import annotations
 
-import multiprocessing as mp
 from collections.abc import Callable, Iterable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
 from scgen.errors import ScgenError
-from scgen.parent_watch import exit_with_parent
+from scgen.parent_watch import spawn_pool
 from scgen.worker import Done, SampleWorker, Task, WorkerSettings
 
 MAX_ATTEMPTS = 3  # a sample is tried at most this often before the run stops
@@ -22,7 +21,6 @@ _worker: SampleWorker | None = None
 
 def _init_process(settings: WorkerSettings) -> None:
     global _worker
-    exit_with_parent()
     _worker = SampleWorker(settings)
 
 
@@ -38,10 +36,7 @@ def run_local(
     attempts = {t.index: 0 for t in tasks}
     pending = list(tasks)
     while pending:
-        pool = ProcessPoolExecutor(
-            max_workers=workers, mp_context=mp.get_context("spawn"),
-            initializer=_init_process, initargs=(settings,),
-        )  # fmt: skip
+        pool = spawn_pool(workers, _init_process, (settings,))
         try:
             pending = _drain(pool, pending, attempts, workers, on_done)
         finally:

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
 import threading
 import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
 
 
 def exit_with_parent(poll_s: float = 0.5) -> None:
@@ -22,3 +26,17 @@ def exit_with_parent(poll_s: float = 0.5) -> None:
         os._exit(1)
 
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+def _start_worker(initializer: Callable[..., None] | None, *initargs: Any) -> None:
+    exit_with_parent()
+    if initializer is not None:
+        initializer(*initargs)
+
+
+def spawn_pool(
+    workers: int, initializer: Callable[..., None] | None = None, initargs: tuple[Any, ...] = ()
+) -> ProcessPoolExecutor:
+    """A pool of `workers` spawned processes (no forked renderer state) that each run `initializer` and
+    end with this process (exit_with_parent)."""
+    return ProcessPoolExecutor(workers, mp.get_context("spawn"), _start_worker, (initializer, *initargs))

@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing as mp
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,7 +22,7 @@ from scgen.executors import run_local, run_ray
 from scgen.factors import spec_key
 from scgen.generator import Generator
 from scgen.model import write_eval_model_dir, write_model_dir
-from scgen.parent_watch import exit_with_parent
+from scgen.parent_watch import spawn_pool
 from scgen.render.base import check_backend
 from scgen.render.conventions import check_quality
 from scgen.scenes.spec import SceneSpec
@@ -120,7 +118,7 @@ def sample_all(generator: Generator, n: int, workers: int) -> list[SceneSpec]:
         return _sample_range((generator, range(n)))
     step = -(-n // (4 * workers))
     chunks = [(generator, range(a, min(n, a + step))) for a in range(0, n, step)]
-    with ProcessPoolExecutor(workers, mp.get_context("spawn"), exit_with_parent) as pool:
+    with spawn_pool(workers) as pool:
         return [spec for part in pool.map(_sample_range, chunks) for spec in part]
 
 
