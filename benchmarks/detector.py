@@ -20,14 +20,11 @@ import json
 import statistics
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from posenet.checkpoint import load_checkpoint
 from posenet.detect import box_metrics, detect_split, detection_entries
 from posenet.detector import load_detector_config, visible_boxes
-from posenet.evaluate import EvalResult, evaluate, format_table
-from posenet.metrics import headline_add
+from posenet.evaluate import EvalResult, evaluate, format_table, summary_rows
 from posenet.train import LAST
 from posenet.train_detector import BEST, train_detector
 from scgen.atomic import atomic_write_text
@@ -56,28 +53,25 @@ def group_rows(groups: dict[str, dict[str, list[int]]]) -> list[tuple[str, set[i
     return [("all", None)] + [(f"{f}/{g}", set(ids)) for f, gs in groups.items() for g, ids in gs.items()]
 
 
-def pose_side_by_side(
-    gt: EvalResult, det: EvalResult, groups: dict[str, dict[str, list[int]]], diameter: float
-) -> str:
-    """Per group, on GT and on detected boxes: the headline ADD@0.02 m and @0.1d, the median rotation and
-    translation errors (a missed image's errors are infinite: it counts against every figure)."""
-    key, name = headline_add(gt.summary["symmetric"])
+def pose_side_by_side(gt: EvalResult, det: EvalResult, groups: dict[str, dict[str, list[int]]]) -> str:
+    """Per group, on GT and on detected boxes: the headline ADD@0.02 m and @0.1d (a missed image fails
+    both) and the median rotation and translation errors (over the images with an estimate), and the
+    misses."""
     rows = []
+    every = {r["im_id"] for r in gt.records}
     for label, members in group_rows(groups):
-        keep = [i for i, r in enumerate(gt.records) if members is None or r["im_id"] in members]
-        if not keep:
+        ids = every if members is None else every & set(members)
+        if not ids:
             continue
-        cells = []
-        for figure in ("add_2cm", "add_0.1d", "re_deg", "te_m"):
-            for res in (gt, det):
-                rs = [res.records[i] for i in keep]
-                if figure.startswith("add"):
-                    bound = 0.02 if figure == "add_2cm" else 0.1 * diameter
-                    cells.append(f"{100 * float(np.mean([r[key] < bound for r in rs])):.1f}")
-                else:
-                    cells.append(f"{statistics.median(r[figure] for r in rs):.3g}")
-        missed = sum(r.get("missed", False) for r in (det.records[i] for i in keep))
-        rows.append([label, str(len(keep)), *cells, str(missed)])
+        on_gt, on_det = gt.summary_of(ids), det.summary_of(ids)
+        cells = [
+            f"{value:.3g}" if key.endswith("median") else f"{100 * value:.1f}"
+            for key in ("add_0.02m", "add_0.1d", "re_deg_median", "te_m_median")
+            for value in (on_gt[key], on_det[key])
+        ]
+        missed = sum(r.get("missed", False) for r in det.records if r["im_id"] in ids)
+        rows.append([label, str(len(ids)), *cells, str(missed)])
+    name = gt.summary["add_metric"]
     header = ["test group", "n", f"{name}@2cm GT", "det", f"{name}@0.1d GT", "det", "re med GT (deg)", "det",
               "te med GT (m)", "det", "missed"]  # fmt: skip
     return format_table(header, rows)
@@ -123,13 +117,14 @@ def main() -> None:
         on_gt = evaluate(args.data, args.pose_ckpt, "test", workers=0)
         on_det = evaluate(args.data, args.pose_ckpt, "test", boxes=boxes, workers=0)
         print(f"\npose: {args.pose_ckpt}, test split, ground-truth boxes vs {boxes}")
-        summary_rows = [
-            [k, f"{on_gt.summary[k]:.4g}", f"{on_det.summary[k]:.4g}"]
-            for k in ("re_deg", "te_m", "add_0.02m", "add_0.1d", "esa", "missed")
-        ]
-        print(format_table(["metric", "GT boxes", "detected boxes"], summary_rows))
-        diameter = load_checkpoint(args.pose_ckpt)["object"]["diameter"]
-        print(pose_side_by_side(on_gt, on_det, groups, diameter))
+        figures = ("missed", "re_deg", "re_deg_median", "te_m", "te_m_median", "add_0.02m", "add_0.1d", "esa")
+        print(
+            format_table(
+                ["metric", "GT boxes", "detected boxes"],
+                summary_rows([on_gt.summary, on_det.summary], figures),
+            )
+        )
+        print(pose_side_by_side(on_gt, on_det, groups))
 
 
 if __name__ == "__main__":

@@ -49,9 +49,8 @@ import numpy as np
 from posenet.config import TrainConfig, load_config
 from posenet.data import open_split
 from posenet.errors import PosenetError
-from posenet.evaluate import by_factor, evaluate, format_table
+from posenet.evaluate import by_factor, evaluate, format_table, summary_rows
 from posenet.losses import LOSS_TERMS
-from posenet.metrics import TURNED_DEG
 from posenet.train import LAST, LOG_FILE, steps_per_epoch, train
 from scgen.atomic import atomic_write_text
 from scgen.errors import ScgenError
@@ -65,6 +64,9 @@ FLOORS = (
     ("test", "add_0.1d", 0.20, "min"),
     ("train", "re_deg_median", 10.0, "max"),
 )
+# the summary figures of the final table, train and test side by side
+LEARNING_FIGURES = ("n", "re_deg", "re_deg_median", "turned", "te_m", "te_m_median", "tz_rel_median",
+                    "add_0.02m", "add_0.1d", "add_rot_0.1d", "te_0.1d")  # fmt: skip
 
 
 def parse_resolution(text: str) -> tuple[int, int]:
@@ -332,24 +334,7 @@ def train_and_follow(args: argparse.Namespace, data: Path, cfg: TrainConfig) -> 
 
     print(f"\nfinal checkpoint ({ckpt}, step {steps}):")
     tr, te = final["train"], final["test"]
-    print(
-        format_table(
-            [f"{final_test.variant}", "train", "test"],
-            [
-                ["instances", str(tr["n"]), str(te["n"])],
-                ["rotation error, mean (deg)", f"{tr['re_deg']:.2f}", f"{te['re_deg']:.2f}"],
-                ["rotation error, median (deg)", f"{tr['re_deg_median']:.2f}", f"{te['re_deg_median']:.2f}"],
-                [f"turned poses, > {TURNED_DEG:.0f} deg (%)", pct(tr["turned"]), pct(te["turned"])],
-                ["translation error, mean (m)", f"{tr['te_m']:.4f}", f"{te['te_m']:.4f}"],
-                ["translation error, median (m)", f"{tr['te_m_median']:.4f}", f"{te['te_m_median']:.4f}"],
-                ["ADD@0.02m (%)", pct(tr["add_0.02m"]), pct(te["add_0.02m"])],
-                ["ADD@0.1d (%)", pct(tr["add_0.1d"]), pct(te["add_0.1d"])],
-                ["  of the rotation alone, at GT t (%)", pct(tr["add_rot_0.1d"]), pct(te["add_rot_0.1d"])],
-                ["  of the translation alone, at GT R (%)", pct(tr["te_0.1d"]), pct(te["te_0.1d"])],
-                ["depth error, median (% of depth)", pct(tr["tz_rel_median"]), pct(te["tz_rel_median"])],
-            ],
-        )
-    )
+    print(format_table([final_test.variant, "train", "test"], summary_rows([tr, te], LEARNING_FIGURES)))
     print("floors (issue 20): " + "; ".join(floor_lines(final)))
     kept = "" if cfg.data.min_visib_fract == 0 else f" with visible fraction > {cfg.data.min_visib_fract}"
     print(f"(instances: every one with a visible pixel; training used {n_train} train instances{kept})")

@@ -18,9 +18,8 @@ from posenet.data.layout import scan_split
 from posenet.detect import detect_split, detection_entries
 from posenet.detector import load_detector_config
 from posenet.errors import PosenetError
-from posenet.evaluate import BATCH_SIZE, bop_results_csv, evaluate, format_table, json_record
+from posenet.evaluate import BATCH_SIZE, bop_results_csv, evaluate, format_table, json_record, summary_rows
 from posenet.evaluate import by_factor as run_by_factor
-from posenet.metrics import TURNED_DEG
 from posenet.models import VARIANTS
 from posenet.train import train as run_train
 from posenet.train_detector import train_detector
@@ -175,29 +174,8 @@ def eval_cmd(
         raise PosenetError("several --ckpt are only compared with --by-factor")
     result = evaluate(data, ckpt[0], split, boxes, workers=workers, batch_size=batch_size, obj_id=obj_id)
     s = result.summary
-    add = s["add_metric"]
-    rows = [
-        ["samples", f"{s['n']}"],
-        ["rotation error (deg)", f"{s['re_deg']:.3f}"],
-        ["rotation error, median (deg)", f"{s['re_deg_median']:.3f}"],
-        [f"turned poses, rotation error > {TURNED_DEG:.0f} deg (%)", f"{100 * s['turned']:.2f}"],
-        ["rotation error, symmetry-aware (deg)", f"{s['re_sym_deg']:.3f}"],
-        ["translation error (m)", f"{s['te_m']:.4f}"],
-        ["translation error, median (m)", f"{s['te_m_median']:.4f}"],
-        ["depth error, median (% of depth)", f"{100 * s['tz_rel_median']:.2f}"],
-        [f"{add}@0.02m (%)", f"{100 * s['add_0.02m']:.2f}"],
-        [f"{add}@0.1d (%)", f"{100 * s['add_0.1d']:.2f}"],
-        ["  ADD@0.1d of the rotation alone, at GT t (%)", f"{100 * s['add_rot_0.1d']:.2f}"],
-        ["  ADD@0.1d of the translation alone, at GT R (%)", f"{100 * s['te_0.1d']:.2f}"],
-        ["ADD-S@0.1d (%)", f"{100 * s['adds_0.1d']:.2f}"],
-        ["MSSD@0.1d (%)", f"{100 * s['mssd_0.1d']:.2f}"],
-        ["AR_MSSD (%)", f"{100 * s['ar_mssd']:.2f}"],
-        ["ESA score", f"{s['esa']:.4f}"],
-        ["latency, batch 1 (ms)", f"{s['latency_ms']:.2f}"],
-    ]
-    rows.insert(1, ["missed (no detection: failures; errors are means over the rest)", f"{s['missed']}"])
     click.echo(f"boxes: {s['boxes']}")
-    click.echo(format_table([f"{result.variant} on {split}", "value"], rows))
+    click.echo(format_table([f"{result.variant} on {split}", "value"], summary_rows([s])))
     if predictions is None:
         predictions = (
             json_path.with_suffix(".predictions.jsonl")

@@ -12,6 +12,7 @@ import dataclasses
 import json
 import math
 import time
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,7 +29,7 @@ from posenet.data.boxes import box_source, read_misses
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose
-from posenet.metrics import headline_add, sample_errors, summarise
+from posenet.metrics import TURNED_DEG, headline_add, sample_errors, summarise
 from posenet.models import PoseNet, create_model
 from scgen import bop
 
@@ -36,12 +37,44 @@ BATCH_SIZE = 32
 LATENCY_WARMUP = 5  # untimed batch-1 forwards (allocator, cuDNN autotuning)
 LATENCY_ITERS = 20  # timed ones; the latency is their median
 
+# Each figure a summary table prints, in order: (label, summary key, format; "%" prints a share in percent,
+# "{add}" is the headline ADD's name). The one home of these labels: `posenet eval`, the learning and the
+# detector benchmarks all print their summaries through summary_rows.
+SUMMARY_FIGURES: tuple[tuple[str, str, str], ...] = (
+    ("instances", "n", "d"),
+    ("missed (no detection: failures; errors are over the rest)", "missed", "d"),
+    ("rotation error, mean (deg)", "re_deg", ".2f"),
+    ("rotation error, median (deg)", "re_deg_median", ".2f"),
+    (f"turned poses, rotation error > {TURNED_DEG:.0f} deg (%)", "turned", "%"),
+    ("rotation error, symmetry-aware, mean (deg)", "re_sym_deg", ".2f"),
+    ("translation error, mean (m)", "te_m", ".4f"),
+    ("translation error, median (m)", "te_m_median", ".4f"),
+    ("depth error, median (% of depth)", "tz_rel_median", "%"),
+    ("{add}@0.02m (%)", "add_0.02m", "%"),
+    ("{add}@0.1d (%)", "add_0.1d", "%"),
+    ("  ADD@0.1d of the rotation alone, at GT t (%)", "add_rot_0.1d", "%"),
+    ("  ADD@0.1d of the translation alone, at GT R (%)", "te_0.1d", "%"),
+    ("ADD-S@0.1d (%)", "adds_0.1d", "%"),
+    ("MSSD@0.1d (%)", "mssd_0.1d", "%"),
+    ("AR_MSSD (%)", "ar_mssd", "%"),
+    ("ESA score", "esa", ".4f"),
+    ("latency, batch 1 (ms)", "latency_ms", ".2f"),
+)
+
 
 @dataclass
 class EvalResult:
     variant: str
     summary: dict[str, Any]  # see metrics.summarise, plus latency_ms and fps
     records: list[dict[str, Any]]  # one per instance: ids, predicted pose, errors
+    errors: dict[str, list[float]]  # each error's list over the records, in their order
+    diameter: float  # of the evaluated object (m)
+
+    def summary_of(self, im_ids: Collection[int]) -> dict[str, Any]:
+        """metrics.summarise over the records of the images `im_ids` only (a factor group, say)."""
+        keep = [i for i, r in enumerate(self.records) if r["im_id"] in im_ids]
+        errors = {k: [v[i] for i in keep] for k, v in self.errors.items()}
+        return summarise(errors, self.diameter, self.summary["symmetric"])
 
 
 def load_model(ckpt: Path, device: torch.device) -> tuple[PoseNet, dict[str, Any]]:
@@ -160,7 +193,7 @@ def evaluate(
         "missed": sum(r.get("missed", False) for r in records),
         "boxes": box_description(boxes),
     }
-    return EvalResult(state["model_config"]["variant"], summary, records)
+    return EvalResult(state["model_config"]["variant"], summary, records, errors, dataset.obj.diameter)
 
 
 def bop_results_csv(records: list[dict[str, Any]]) -> str:
@@ -242,6 +275,27 @@ def by_factor(
         }
         for name, table in tables.items()
     }
+
+
+def summary_rows(
+    summaries: Sequence[Mapping[str, Any]], keys: Collection[str] | None = None
+) -> list[list[str]]:
+    """Table rows [label, one cell per summary] of the SUMMARY_FIGURES named in `keys` (default: every
+    figure the summaries hold), in SUMMARY_FIGURES' order; a missing or nan value prints as "-"."""
+
+    def cell(summary: Mapping[str, Any], key: str, fmt: str) -> str:
+        value = summary.get(key)
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            return "-"
+        return f"{100 * value:.2f}" if fmt == "%" else format(value, fmt)
+
+    wanted = keys if keys is not None else {k for k in summaries[0] if all(k in s for s in summaries)}
+    add = summaries[0]["add_metric"]
+    return [
+        [label.format(add=add), *(cell(s, key, fmt) for s in summaries)]
+        for label, key, fmt in SUMMARY_FIGURES
+        if key in wanted
+    ]
 
 
 def format_table(header: list[str], rows: list[list[str]]) -> str:

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
-from posenet.evaluate import evaluate, format_table
+from posenet.evaluate import SUMMARY_FIGURES, evaluate, format_table, summary_rows
 from scgen.cli import main as scgen_main
 
 # Float32 forwards round differently per batch size: absolute tolerances in each key's unit (the rotation
@@ -89,6 +89,28 @@ def test_batched_evaluation_gives_the_batch_1_records(dataset_dir: Path, checkpo
     assert sb.keys() == s1.keys() and sb["fps"] == 1000 / sb["latency_ms"]
     for key in s1.keys() - {"latency_ms", "fps"}:
         assert sb[key] == pytest.approx(s1[key], abs=SUMMARY_TOLERANCE.get(key, 0.0)), key
+
+
+def test_group_summaries_and_summary_rows(dataset_dir: Path, checkpoint: Path) -> None:
+    result = evaluate(dataset_dir, checkpoint, workers=0)
+    ids = [r["im_id"] for r in result.records]
+    whole = result.summary_of(set(ids))
+    assert whole == {k: result.summary[k] for k in whole}  # every image: the split's own summary
+    part = result.summary_of(set(ids[:2]))
+    assert part["n"] == 2 and part["re_deg"] == pytest.approx(
+        (result.errors["re_deg"][0] + result.errors["re_deg"][1]) / 2
+    )
+    # every figure the tables print is a key of the summary, under one label of its own
+    assert {key for _, key, _ in SUMMARY_FIGURES} <= set(result.summary)
+    assert len({label for label, _, _ in SUMMARY_FIGURES}) == len(SUMMARY_FIGURES)
+    rows = summary_rows([result.summary, {**part, "turned": float("nan")}], ("n", "turned", "add_0.02m"))
+    assert [r[0] for r in rows] == [
+        "instances",
+        "turned poses, rotation error > 135 deg (%)",
+        "ADD@0.02m (%)",
+    ]
+    assert rows[0][1:] == [str(len(ids)), "2"] and rows[1][2] == "-"
+    assert rows[2][1] == f"{100 * result.summary['add_0.02m']:.2f}"
 
 
 def test_by_factor_table_averages_checkpoints_of_one_variant(
