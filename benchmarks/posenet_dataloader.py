@@ -3,7 +3,9 @@
 Prints (1) training samples/s of one loader process with the paper's augmentations (DZI, brightness/
 contrast at p=0.8, background replacement at p=0.5) at the paper's 256/64 resolution, (2) the DataLoader
 throughput with --workers processes, (3) the training step time (forward, losses, backward, Ranger step)
-of --config (or each --variant) on the current device (paper on a GPU, smoke on a CPU by default).
+of --config (or each --variant) on the current device (paper on a GPU, smoke on a CPU by default), with
+the weights and images in training's memory format (posenet.train.memory_format: channels-last on a CPU)
+and, on a CPU, also in the default contiguous one, side by side.
 
 Usage: python benchmarks/posenet_dataloader.py [--data DIR] [--workers 2] [--batch 8] [--config paper|smoke]
        [--variant V ...] [--steps 5]
@@ -23,7 +25,7 @@ from torch.utils.data import DataLoader
 from posenet.config import load_config
 from posenet.data import PoseDataset, open_split
 from posenet.models import create_model
-from posenet.train import make_optimizer, pm_loss_points, train_step, worker_init
+from posenet.train import make_optimizer, memory_format, pm_loss_points, train_step, worker_init
 from scgen.runner import RenderJob, run_render
 
 
@@ -59,8 +61,11 @@ def loader_rate(ds: PoseDataset, workers: int, n: int, batch: int) -> float:
     return done / (time.perf_counter() - tic)
 
 
-def step_time(data: Path, config: str, variant: str | None, steps: int) -> tuple[float, int, str]:
-    """(seconds per training step, batch size, device) for `config`'s model (or `variant`) and batch."""
+def step_time(
+    data: Path, config: str, variant: str | None, steps: int, layout: torch.memory_format
+) -> tuple[float, int, str]:
+    """(seconds per training step, batch size, device) for `config`'s model (or `variant`) and batch,
+    weights and input images in memory format `layout`."""
     cfg = load_config(config, variant=variant)
     mc = cfg.model_config()
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -68,7 +73,8 @@ def step_time(data: Path, config: str, variant: str | None, steps: int) -> tuple
     bs = cfg.optim.batch_size
     items = [ds[(0, i % len(ds))] for i in range(bs)]
     batch = {k: torch.stack([it[k] for it in items]).to(device) for k in items[0]}
-    model = create_model(cfg.variant, cfg.preset, **cfg.model).to(device).train()
+    batch["roi_img"] = batch["roi_img"].contiguous(memory_format=layout)
+    model = create_model(cfg.variant, cfg.preset, **cfg.model).to(device, memory_format=layout).train()
     opt, _ = make_optimizer(model, cfg.optim, total_iters=steps + 2)
     pm = pm_loss_points(ds.obj, device)
     times = []
@@ -105,10 +111,18 @@ def main() -> None:
     rate = loader_rate(ds, args.workers, args.samples, args.batch)
     print(f"loader, {args.workers} worker processes, batches of {args.batch}:  {rate:6.1f} samples/s")
     torch.set_num_threads(threads)
+    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    trained = memory_format(device)
+    layouts = [trained] + ([torch.contiguous_format] if trained != torch.contiguous_format else [])
     for variant in args.variant or [None]:
-        sec, bs, dev = step_time(data, config, variant, args.steps)
         name = f"{config} config" + (f", {variant}" if variant else "")
-        print(f"train step ({name}, batch {bs}, {dev}): {1000 * sec:.1f} ms ({bs / sec:.1f} samples/s)")
+        for layout in layouts:
+            sec, bs, dev = step_time(data, config, variant, args.steps, layout)
+            what = str(layout).removeprefix("torch.") + (" (training's)" if layout == trained else "")
+            print(
+                f"train step ({name}, batch {bs}, {dev}, {what}): "
+                f"{1000 * sec:.1f} ms ({bs / sec:.1f} samples/s)"
+            )
 
 
 if __name__ == "__main__":

@@ -105,8 +105,18 @@ def _init_distributed() -> tuple[int, int, torch.device]:
     return rank, world, torch.device("cpu")
 
 
+def memory_format(device: torch.device) -> torch.memory_format:
+    """How training lays out the network's weights and input images: channels-last on a CPU, where
+    oneDNN's NHWC convolutions make the smoke preset's step 17 % faster (206 -> 171 ms on 2 threads,
+    batch 8; `python benchmarks/posenet_dataloader.py --data DIR`); the default elsewhere (unmeasured)."""
+    return torch.channels_last if device.type == "cpu" else torch.contiguous_format
+
+
 def _to(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch.Tensor]:
-    return {k: v.to(device, non_blocking=True) for k, v in batch.items()}
+    """The batch on `device`, its input images in the training memory format."""
+    moved = {k: v.to(device, non_blocking=True) for k, v in batch.items()}
+    moved["roi_img"] = moved["roi_img"].contiguous(memory_format=memory_format(device))
+    return moved
 
 
 class RunLog:
@@ -285,7 +295,7 @@ def _build(
     if device.type == "cpu":
         pin_cpu_threads(cfg.optim.threads)
     torch.manual_seed(cfg.optim.seed)
-    model = create_model(cfg.variant, cfg.preset, **cfg.model).to(device)
+    model = create_model(cfg.variant, cfg.preset, **cfg.model).to(device, memory_format=memory_format(device))
     optimizer, scheduler = make_optimizer(model, cfg.optim, total)
     return model, optimizer, scheduler
 
