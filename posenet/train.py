@@ -107,8 +107,8 @@ def _init_distributed() -> tuple[int, int, torch.device]:
 
 def memory_format(device: torch.device) -> torch.memory_format:
     """How training lays out the network's weights and input images: channels-last on a CPU, where
-    oneDNN's NHWC convolutions make the smoke preset's step 17 % faster (206 -> 171 ms on 2 threads,
-    batch 8; `python benchmarks/posenet_dataloader.py --data DIR`); the default elsewhere (unmeasured)."""
+    oneDNN's NHWC convolutions make the smoke preset's step faster (240 -> 185 ms on 2 threads, batch 8:
+    `python benchmarks/posenet_dataloader.py --data DIR`); the default elsewhere (unmeasured)."""
     return torch.channels_last if device.type == "cpu" else torch.contiguous_format
 
 
