@@ -60,7 +60,7 @@ def pose_side_by_side(gt: EvalResult, det: EvalResult, groups: dict[str, dict[st
     rows = []
     every = {r["im_id"] for r in gt.records}
     for label, members in group_rows(groups):
-        ids = every if members is None else every & set(members)
+        ids = every if members is None else every & members
         if not ids:
             continue
         on_gt, on_det = gt.summary_of(ids), det.summary_of(ids)

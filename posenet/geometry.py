@@ -79,6 +79,12 @@ def site_decode(site: Tensor, K: Tensor, crop_center: Tensor, box_wh: Tensor, re
     return torch.stack((tx, ty, tz), dim=-1)
 
 
+def roi_translation(site: Tensor, roi: dict[str, Tensor]) -> Tensor:
+    """Translation t of SITE `site` in the RoI geometry of a dataset item or batch `roi` (its `K`,
+    `crop_center`, `box_wh` and `resize_ratio`)."""
+    return site_decode(site, roi["K"], roi["crop_center"], roi["box_wh"], roi["resize_ratio"])
+
+
 def symmetric_poses(R: Tensor, t: Tensor, symmetries: Tensor) -> tuple[Tensor, Tensor]:
     """Every pose showing the same view of the object as (R, t): (R·S_R, R·S_t + t) for each of its (K, 4, 4)
     symmetry transforms S (model frame, identity included); shapes (..., K, 3, 3) and (..., K, 3)."""
@@ -89,5 +95,5 @@ def symmetric_poses(R: Tensor, t: Tensor, symmetries: Tensor) -> tuple[Tensor, T
 def decode_pose(out: dict[str, Tensor], roi: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
     """Egocentric (R, t) from network outputs (allocentric `rot6d`, `site`) and a batch's RoI geometry
     (`K`, `crop_center`, `box_wh`, `resize_ratio`)."""
-    t = site_decode(out["site"], roi["K"], roi["crop_center"], roi["box_wh"], roi["resize_ratio"])
+    t = roi_translation(out["site"], roi)
     return allo_to_ego(rot6d_to_mat(out["rot6d"]), t), t
