@@ -25,7 +25,7 @@ from torch.utils.data import DataLoader
 from posenet.config import load_config
 from posenet.data import PoseDataset, open_split
 from posenet.models import create_model
-from posenet.train import make_optimizer, memory_format, pm_loss_points, train_step, worker_init
+from posenet.train import compared_layouts, make_optimizer, pm_loss_points, train_step, worker_init
 from scgen.runner import RenderJob, run_render
 
 
@@ -112,13 +112,10 @@ def main() -> None:
     print(f"loader, {args.workers} worker processes, batches of {args.batch}:  {rate:6.1f} samples/s")
     torch.set_num_threads(threads)
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    trained = memory_format(device)
-    layouts = [trained] + ([torch.contiguous_format] if trained != torch.contiguous_format else [])
     for variant in args.variant or [None]:
         name = f"{config} config" + (f", {variant}" if variant else "")
-        for layout in layouts:
+        for layout, what in compared_layouts(device):
             sec, bs, dev = step_time(data, config, variant, args.steps, layout)
-            what = str(layout).removeprefix("torch.") + (" (training's)" if layout == trained else "")
             print(
                 f"train step ({name}, batch {bs}, {dev}, {what}): "
                 f"{1000 * sec:.1f} ms ({bs / sec:.1f} samples/s)"

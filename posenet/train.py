@@ -108,8 +108,17 @@ def _init_distributed() -> tuple[int, int, torch.device]:
 def memory_format(device: torch.device) -> torch.memory_format:
     """How training lays out the network's weights and input images: channels-last on a CPU, where
     oneDNN's NHWC convolutions make the smoke preset's step faster (240 -> 185 ms on 2 threads, batch 8:
-    `python benchmarks/posenet_dataloader.py --data DIR`); the default elsewhere (unmeasured)."""
+    `python benchmarks/posenet_dataloader.py --data DIR`) and the CPU detector's (603 -> 460 ms:
+    `python benchmarks/detector_step.py --data DIR`); the default elsewhere (unmeasured)."""
     return torch.channels_last if device.type == "cpu" else torch.contiguous_format
+
+
+def compared_layouts(device: torch.device) -> list[tuple[torch.memory_format, str]]:
+    """Training's memory format, then the default contiguous one where that differs, each with a label:
+    what the speed benchmarks time side by side."""
+    trained = memory_format(device)
+    layouts = [trained] + ([torch.contiguous_format] if trained != torch.contiguous_format else [])
+    return [(f, str(f).removeprefix("torch.") + (" (training's)" if f == trained else "")) for f in layouts]
 
 
 def _to(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch.Tensor]:

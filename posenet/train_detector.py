@@ -28,7 +28,7 @@ from posenet.detector import (
     visible_boxes,
 )
 from posenet.errors import PosenetError
-from posenet.train import LAST, RunLog, make_optimizer, pin_cpu_threads, stop_step, worker_init
+from posenet.train import LAST, RunLog, make_optimizer, memory_format, pin_cpu_threads, stop_step, worker_init
 from scgen.atomic import atomic_write_text
 
 BEST = "best.pt"
@@ -52,7 +52,8 @@ def train_detector(
     if device.type == "cpu":
         pin_cpu_threads(o.threads)
     torch.manual_seed(o.seed)
-    model = build_detector(cfg.model_dict(), cfg.pretrained).to(device)
+    # channels-last weights make every convolution's output channels-last on a CPU (FCOS batches the images)
+    model = build_detector(cfg.model_dict(), cfg.pretrained).to(device, memory_format=memory_format(device))
     optimizer, scheduler = make_optimizer(model, o, total)
     step, best = 0, -math.inf
     if resume:
@@ -111,32 +112,32 @@ def _epoch(
     model.train()
     tic = time.perf_counter()
     for images, targets in loader:
-        losses = model(
-            [i.to(device) for i in images], [{k: v.to(device) for k, v in t.items()} for t in targets]
-        )
-        loss = sum(losses.values())
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
         lr = optimizer.param_groups[0]["lr"]
-        optimizer.step()
+        terms = detector_step(model, optimizer, images, targets, device)
         scheduler.step()
         step += 1
         toc = time.perf_counter()
-        terms = {k: float(v.detach()) for k, v in losses.items()}
-        log.step(
-            {
-                "step": step,
-                "epoch": epoch,
-                "lr": lr,
-                "step_s": toc - tic,
-                "loss": float(loss.detach()),
-                **terms,
-            }
-        )
+        loss = sum(terms.values())
+        log.step({"step": step, "epoch": epoch, "lr": lr, "step_s": toc - tic, "loss": loss, **terms})
         tic = toc
         if step >= stop:
             break
     return step
+
+
+def detector_step(
+    model: FCOS,
+    optimizer: torch.optim.Optimizer,
+    images: list[torch.Tensor],
+    targets: list[dict[str, torch.Tensor]],
+    device: torch.device,
+) -> dict[str, float]:
+    """One optimisation step on a batch (FCOS's summed losses); returns each loss term."""
+    losses = model([i.to(device) for i in images], [{k: v.to(device) for k, v in t.items()} for t in targets])
+    optimizer.zero_grad(set_to_none=True)
+    sum(losses.values()).backward()
+    optimizer.step()
+    return {k: float(v.detach()) for k, v in losses.items()}
 
 
 def _save(

@@ -1,0 +1,60 @@
+"""Detector training step time, in training's memory format and in the default one, side by side.
+
+Times `posenet.train_detector.detector_step` (FCOS forward with its losses, backward, Ranger step) of
+--config on one fixed batch of the dataset's training images, augmented as training augments them, on
+the current device. The weights are laid out as training lays them out (posenet.train.memory_format:
+channels-last on a CPU) and, on a CPU, also in the default contiguous format.
+
+Usage: python benchmarks/detector_step.py --data DIR [--config cpu] [--steps 20]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import torch
+
+from posenet.detector import DetectionDataset, build_detector, collate, image_groups, load_detector_config
+from posenet.train import compared_layouts, make_optimizer, pin_cpu_threads
+from posenet.train_detector import detector_step
+
+WARMUP = 3  # untimed steps (allocator, oneDNN kernel selection)
+
+
+def step_time(data: Path, config: str, steps: int, layout: torch.memory_format) -> tuple[float, int]:
+    """(seconds per training step, batch size) of `config`'s detector with weights in `layout`."""
+    cfg = load_detector_config(config)
+    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    dataset = DetectionDataset(image_groups(data, "train", cfg.obj_id), cfg, train=True, seed=cfg.optim.seed)
+    images, targets = collate([dataset[i] for i in range(cfg.optim.batch_size)])
+    torch.manual_seed(cfg.optim.seed)
+    model = build_detector(cfg.model_dict(), cfg.pretrained).to(device, memory_format=layout).train()
+    optimizer, _ = make_optimizer(model, cfg.optim, total_iters=steps + WARMUP)
+    times = []
+    for _ in range(steps + WARMUP):
+        tic = time.perf_counter()
+        detector_step(model, optimizer, images, targets, device)
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        times.append(time.perf_counter() - tic)
+    return sum(times[WARMUP:]) / steps, cfg.optim.batch_size
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", type=Path, required=True, help="An scgen dataset with a train split.")
+    ap.add_argument("--config", default="cpu", help="cpu | paper | a detector config file [cpu].")
+    ap.add_argument("--steps", type=int, default=20, help="Timed steps per layout.")
+    args = ap.parse_args()
+    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if device.type == "cpu":
+        pin_cpu_threads(load_detector_config(args.config).optim.threads)
+    for layout, what in compared_layouts(device):
+        sec, bs = step_time(args.data, args.config, args.steps, layout)
+        print(f"detector train step ({args.config}, batch {bs}, {device.type}, {what}): {1e3 * sec:.0f} ms")
+
+
+if __name__ == "__main__":
+    main()
