@@ -16,17 +16,24 @@ from pathlib import Path
 
 import torch
 
-from posenet.detector import DetectionDataset, build_detector, collate, image_groups, load_detector_config
+from posenet.detector import (
+    DetectionDataset,
+    DetectorConfig,
+    build_detector,
+    collate,
+    image_groups,
+    load_detector_config,
+)
 from posenet.train import compared_layouts, make_optimizer, pin_cpu_threads
 from posenet.train_detector import detector_step
 
 WARMUP = 3  # untimed steps (allocator, oneDNN kernel selection)
 
 
-def step_time(data: Path, config: str, steps: int, layout: torch.memory_format) -> tuple[float, int]:
-    """(seconds per training step, batch size) of `config`'s detector with weights in `layout`."""
-    cfg = load_detector_config(config)
-    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+def step_time(
+    data: Path, cfg: DetectorConfig, steps: int, layout: torch.memory_format, device: torch.device
+) -> float:
+    """Seconds per training step of `cfg`'s detector on `device`, with weights in `layout`."""
     dataset = DetectionDataset(image_groups(data, "train", cfg.obj_id), cfg, train=True, seed=cfg.optim.seed)
     images, targets = collate([dataset[i] for i in range(cfg.optim.batch_size)])
     torch.manual_seed(cfg.optim.seed)
@@ -39,7 +46,7 @@ def step_time(data: Path, config: str, steps: int, layout: torch.memory_format) 
         if device.type == "cuda":
             torch.cuda.synchronize()
         times.append(time.perf_counter() - tic)
-    return sum(times[WARMUP:]) / steps, cfg.optim.batch_size
+    return sum(times[WARMUP:]) / steps
 
 
 def main() -> None:
@@ -48,11 +55,13 @@ def main() -> None:
     ap.add_argument("--config", default="cpu", help="cpu | paper | a detector config file [cpu].")
     ap.add_argument("--steps", type=int, default=20, help="Timed steps per layout.")
     args = ap.parse_args()
+    cfg = load_detector_config(args.config)
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if device.type == "cpu":
-        pin_cpu_threads(load_detector_config(args.config).optim.threads)
+        pin_cpu_threads(cfg.optim.threads)
+    bs = cfg.optim.batch_size
     for layout, what in compared_layouts(device):
-        sec, bs = step_time(args.data, args.config, args.steps, layout)
+        sec = step_time(args.data, cfg, args.steps, layout, device)
         print(f"detector train step ({args.config}, batch {bs}, {device.type}, {what}): {1e3 * sec:.0f} ms")
 
 

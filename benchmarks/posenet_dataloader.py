@@ -62,13 +62,17 @@ def loader_rate(ds: PoseDataset, workers: int, n: int, batch: int) -> float:
 
 
 def step_time(
-    data: Path, config: str, variant: str | None, steps: int, layout: torch.memory_format
-) -> tuple[float, int, str]:
-    """(seconds per training step, batch size, device) for `config`'s model (or `variant`) and batch,
+    data: Path,
+    config: str,
+    variant: str | None,
+    steps: int,
+    layout: torch.memory_format,
+    device: torch.device,
+) -> tuple[float, int]:
+    """(seconds per training step, batch size) for `config`'s model (or `variant`) and batch on `device`,
     weights and input images in memory format `layout`."""
     cfg = load_config(config, variant=variant)
     mc = cfg.model_config()
-    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     ds = open_split(data, "train", cfg.data, mc, train=True)
     bs = cfg.optim.batch_size
     items = [ds[(0, i % len(ds))] for i in range(bs)]
@@ -84,7 +88,7 @@ def step_time(
         if device.type == "cuda":
             torch.cuda.synchronize()
         times.append(time.perf_counter() - tic)
-    return sum(times[2:]) / steps, bs, torch.cuda.get_device_name() if device.type == "cuda" else "cpu"
+    return sum(times[2:]) / steps, bs
 
 
 def main() -> None:
@@ -112,10 +116,11 @@ def main() -> None:
     print(f"loader, {args.workers} worker processes, batches of {args.batch}:  {rate:6.1f} samples/s")
     torch.set_num_threads(threads)
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    dev = torch.cuda.get_device_name() if device.type == "cuda" else "cpu"
     for variant in args.variant or [None]:
         name = f"{config} config" + (f", {variant}" if variant else "")
         for layout, what in compared_layouts(device):
-            sec, bs, dev = step_time(data, config, variant, args.steps, layout)
+            sec, bs = step_time(data, config, variant, args.steps, layout, device)
             print(
                 f"train step ({name}, batch {bs}, {dev}, {what}): "
                 f"{1000 * sec:.1f} ms ({bs / sec:.1f} samples/s)"
