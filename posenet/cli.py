@@ -11,6 +11,7 @@ import click
 import cv2
 import torch
 
+from posenet.amp import AMP_MODES
 from posenet.bench import PAPER, device_label, format_report, resolve_device, run_bench
 from posenet.config import load_config
 from posenet.data.boxes import boxes_from_gt
@@ -89,6 +90,12 @@ def main() -> None:
     default=None,
     help="Object to train on  [default: the config's data.obj_id, 1]",
 )
+@click.option(
+    "--amp",
+    type=click.Choice(AMP_MODES),
+    default=None,
+    help="Mixed precision, overriding optim.amp (auto: bf16 on a CUDA GPU that has it, else float32).",
+)
 @one_line_errors(PosenetError, ScgenError)
 def train(
     data: Path,
@@ -99,12 +106,13 @@ def train(
     max_steps: int | None,
     resume: bool,
     obj_id: int | None,
+    amp: str | None,
 ) -> None:
     """Train on the dataset's train split (under torchrun: DDP over the processes)."""
     if config is None:
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "paper"
-    cfg = load_config(config, variant=variant, epochs=epochs, obj_id=obj_id)
+    cfg = load_config(config, variant=variant, epochs=epochs, obj_id=obj_id, amp=amp)
     ckpt = run_train(data, out, cfg, resume=resume, max_steps=max_steps)
     if os.environ.get("RANK", "0") == "0":  # torchrun: one line, not one per process
         click.echo(f"checkpoint: {ckpt}")

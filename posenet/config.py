@@ -27,6 +27,7 @@ from typing import Any
 
 import yaml
 
+from posenet.amp import AMP_MODES
 from posenet.errors import PosenetError
 from posenet.models import PRESETS, ModelConfig
 from posenet.models.backbone import IMAGENET, PACKAGE
@@ -38,7 +39,9 @@ class DataConfig:
 
     obj_id: int = 1  # the object trained and evaluated (BOP obj_id; `--obj-id`)
     pad_scale: float = 1.5  # DZI: crop side = max(w, h) * pad_scale
-    min_visib_fract: float = 0.0  # > 0: training also skips instances this little visible (GDR-Net: 0.3)
+    # > 0: training also skips instances this little visible (GDR-Net's configs: 0.0, or 0.2 for YCB-V;
+    # GDRNPP's: 0.3)
+    min_visib_fract: float = 0.0
     num_pm_points: int = 3000
     dzi_prob: float = 1.0  # scale/shift perturbation of the crop
     dzi_scale: float = 0.25
@@ -54,7 +57,8 @@ class DataConfig:
 
 @dataclass
 class LossConfig:
-    """Loss weights (paper eq. 7-8) and the mask loss type ('bce' on logits or 'l1' on probabilities)."""
+    """Loss weights (paper eq. 7-8) and the mask loss type: 'bce' (the mask channel as logits) or 'l1'
+    (GDR-Net's default: L1 of the raw channel against the 0/1 mask; see losses.mask_loss)."""
 
     coord: float = 1.0
     mask: float = 1.0
@@ -83,6 +87,12 @@ class OptimConfig:
     threads: int = 0  # CPU threads for training (0: one per core); pinned so a run's losses are reproducible
     log_every: int = 10  # TensorBoard scalar interval (steps)
     ckpt_every: int = 1  # epochs between rewrites of OUT/last.pt (it is always written when a run stops)
+    # mixed precision (posenet.amp): auto (bf16 on a CUDA GPU that has it, else float32) | off | bf16 | fp16
+    amp: str = "auto"
+    # Ranger's gradient centralisation (GDR-Net's default): each conv / FC weight's gradient minus its mean
+    grad_centralization: bool = False
+    # weight decay on norm weights and biases too, as Ranger does; False: timm's no-decay group for them
+    decay_norms_biases: bool = False
 
 
 @dataclass
@@ -125,12 +135,17 @@ def smoke_config() -> TrainConfig:
         # lr 1e-3: from the ImageNet Lite0, coord left its plateau sooner than at 3e-4 (0.478 vs 0.501 at step
         # 2500; issue 20); 120 epochs of the 700-image benchmark set (10440 steps at ~6 steps/s) fill the
         # 35-minute CPU budget
-        optim=OptimConfig(batch_size=8, epochs=120, warmup_iters=50, lr=1e-3, log_every=1),
+        # float32 unless asked (optim.amp), also on a GPU
+        optim=OptimConfig(batch_size=8, epochs=120, warmup_iters=50, lr=1e-3, log_every=1, amp="off"),
     )
 
 
 def load_config(
-    name_or_path: str, variant: str | None = None, epochs: int | None = None, obj_id: int | None = None
+    name_or_path: str,
+    variant: str | None = None,
+    epochs: int | None = None,
+    obj_id: int | None = None,
+    amp: str | None = None,
 ) -> TrainConfig:
     """A preset name or a YAML/TOML file, then the command-line overrides; validated."""
     raw = {"preset": name_or_path} if name_or_path in PRESETS else read_config_file(Path(name_or_path))
@@ -141,6 +156,8 @@ def load_config(
         cfg.optim.epochs = epochs
     if obj_id is not None:
         cfg.data.obj_id = obj_id
+    if amp is not None:
+        cfg.optim.amp = amp
     _validate(cfg)
     return cfg
 
@@ -217,6 +234,8 @@ def _validate(cfg: TrainConfig) -> None:
         raise PosenetError(
             "optim.batch_size, epochs, log_every, ckpt_every must be >= 1, optim.lr and optim.eps > 0"
         )
+    if o.amp not in AMP_MODES:
+        raise PosenetError(f"optim.amp must be one of {', '.join(AMP_MODES)}, got {o.amp!r}")
     if d.workers < 0 or o.threads < 0:
         raise PosenetError("data.workers and optim.threads must be >= 0")
     if not 0.0 <= o.anneal_point <= 1.0:

@@ -34,6 +34,7 @@ from posenet.models.backbone import IMAGENET, PACKAGE, initial_weights, input_me
 PRESETS = ("cpu", "paper")
 ALIASES = {"smoke": "cpu"}
 ARCHS = ("fcos-timm-fpn", "fcos-resnet50-fpn")
+POSE_ONLY_OPTIM = ("amp", "grad_centralization")  # OptimConfig fields only pose training reads
 STRIDES = (2, 4, 8, 16, 32)  # the backbone strides fcos-timm-fpn may predict at (min_stride ... 32)
 
 
@@ -114,6 +115,9 @@ def detector_config_from_dict(raw: dict[str, Any]) -> DetectorConfig:
     cfg = cpu_config() if preset == "cpu" else DetectorConfig()
     optim = raw.pop("optim", None)
     if optim is not None:
+        changed = [k for k in POSE_ONLY_OPTIM if k in optim and optim[k] != getattr(OptimConfig(), k)]
+        if changed:
+            raise PosenetError(f"optim.{changed[0]} is a pose-training option, not the detector's")
         cfg.optim = override_fields(cfg.optim, optim, "optim")
     cfg = override_fields(cfg, raw, "detector")
     if cfg.arch not in ARCHS:

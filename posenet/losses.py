@@ -13,6 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from posenet.amp import full_precision
 from posenet.config import LossConfig
 from posenet.geometry import decode_pose, symmetric_poses
 
@@ -24,11 +25,18 @@ def coord_loss(xyz: Tensor, target: Tensor, visible: Tensor) -> Tensor:
     return ((xyz - target).abs() * visible).sum() / visible.sum().clamp(min=1.0)
 
 
-def mask_loss(logits: Tensor, target: Tensor, kind: str) -> Tensor:
-    """Visible-mask loss: BCE on logits ('bce') or mean L1 of the sigmoid probability ('l1')."""
+def mask_loss(mask: Tensor, target: Tensor, kind: str) -> Tensor:
+    """Visible-mask loss on the head's mask channel: BCE taking it as logits ('bce', GDR-Net's `BCE`
+    option) or, as GDR-Net's default `L1`, the mean L1 of the raw channel against the 0/1 mask ('l1')."""
     if kind == "bce":
-        return F.binary_cross_entropy_with_logits(logits, target)
-    return (logits.sigmoid() - target).abs().mean()
+        return F.binary_cross_entropy_with_logits(mask, target)
+    return (mask - target).abs().mean()
+
+
+def mask_probability(mask: Tensor, kind: str) -> Tensor:
+    """The visible-mask probability that a mask channel trained with loss `kind` stands for: the sigmoid
+    of a logit ('bce'), the raw value clipped to [0, 1] ('l1')."""
+    return mask.sigmoid() if kind == "bce" else mask.clamp(0.0, 1.0)
 
 
 def region_loss(logits: Tensor, labels: Tensor, visible: Tensor) -> Tensor:
@@ -79,17 +87,24 @@ def closest_symmetric_rotation(
 def pose_losses(
     out: dict[str, Tensor], batch: dict[str, Tensor], pm: PmObject, cfg: LossConfig
 ) -> tuple[Tensor, dict[str, Tensor]]:
-    """(weighted total, {term: unweighted value}) for one batch of network outputs and dataset targets."""
+    """(weighted total, {term: unweighted value}) for one batch of network outputs and dataset targets.
+
+    Under autocast (mixed precision), pose decoding and the point-matching loss still run in float32, and
+    the SITE terms take the float32 SITE.
+    """
     visible = batch["roi_mask_visib"]
-    R_pred, _ = decode_pose(out, batch)
-    R_target = closest_symmetric_rotation(R_pred, batch["R"], batch["t"], pm)
+    site = out["site"].float()
+    with full_precision(visible.device):
+        R_pred, _ = decode_pose({"rot6d": out["rot6d"].float(), "site": site}, batch)
+        R_target = closest_symmetric_rotation(R_pred, batch["R"], batch["t"], pm)
+        pm_term = pm_loss(R_pred, R_target, pm.points)
     terms = {
         "coord": coord_loss(out["xyz"], batch["roi_xyz"], visible),
         "mask": mask_loss(out["mask"], visible, cfg.mask_type),
         "region": region_loss(out["region"], batch["roi_region"], visible),
-        "pm": pm_loss(R_pred, R_target, pm.points),
-        "cent": F.l1_loss(out["site"][:, :2], batch["site"][:, :2]),
-        "z": F.l1_loss(out["site"][:, 2], batch["site"][:, 2]),
+        "pm": pm_term,
+        "cent": F.l1_loss(site[:, :2], batch["site"][:, :2]),
+        "z": F.l1_loss(site[:, 2], batch["site"][:, 2]),
     }
     total = sum(getattr(cfg, name) * value for name, value in terms.items())
     return total, terms

@@ -25,6 +25,7 @@ from torch.utils.data import DataLoader
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
+from posenet.amp import Precision
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
 from posenet.config import OptimConfig, TrainConfig, config_from_dict
 from posenet.data import EpochSampler, PoseDataset, open_split
@@ -87,8 +88,19 @@ def make_optimizer(
         betas=RANGER_BETAS,
         eps=o.eps,
         decoupled_weight_decay=True,  # Ranger decays weights directly (p -= lr * wd * p)
+        filter_bias_and_bn=not o.decay_norms_biases,  # timm's no-decay group: biases and 1-d (norm) weights
     )
     return optimizer, LambdaLR(optimizer, lambda it: lr_factor(it, total_iters, o))
+
+
+@torch.no_grad()
+def centralize_gradients(optimizer: torch.optim.Optimizer) -> None:
+    """Ranger's gradient centralisation (GDR-Net's default `use_gc`): the gradient of every parameter
+    with more than one dimension (conv and FC weights) minus its mean over all but the output dimension."""
+    for group in optimizer.param_groups:
+        for p in group["params"]:
+            if p.grad is not None and p.grad.dim() > 1:
+                p.grad.sub_(p.grad.mean(dim=tuple(range(1, p.grad.dim())), keepdim=True))
 
 
 def _init_distributed() -> tuple[int, int, torch.device]:
@@ -177,14 +189,22 @@ def train_step(
     batch: dict[str, torch.Tensor],
     pm: PmObject,
     cfg: TrainConfig,
+    precision: Precision | None = None,
 ) -> torch.Tensor:
-    """One optimisation step; returns the detached (total, *terms) losses."""
-    out = model(batch["roi_img"], batch["roi_coord2d"])
-    loss, terms = pose_losses(out, batch, pm, cfg.loss)
+    """One optimisation step in `precision` (default float32); returns the detached float32 (total, *terms)
+    losses. fp16 scales the loss (GradScaler); gradient centralisation sees the unscaled gradients."""
+    precision = precision or Precision("off", batch["roi_img"].device)
+    with precision.autocast():
+        out = model(batch["roi_img"], batch["roi_coord2d"])
+        loss, terms = pose_losses(out, batch, pm, cfg.loss)
     optimizer.zero_grad(set_to_none=True)
-    loss.backward()
-    optimizer.step()
-    return torch.stack([loss.detach(), *(terms[k].detach() for k in LOSS_TERMS)])
+    precision.scaler.scale(loss).backward()
+    if cfg.optim.grad_centralization:
+        precision.scaler.unscale_(optimizer)
+        centralize_gradients(optimizer)
+    precision.scaler.step(optimizer)
+    precision.scaler.update()
+    return torch.stack([loss.detach(), *(terms[k].detach() for k in LOSS_TERMS)]).float()
 
 
 def train(
@@ -220,6 +240,7 @@ class _Run:
     loader: DataLoader
     pm: PmObject
     device: torch.device
+    precision: Precision
     world: int
     step: int  # optimisation steps done
     stop: int  # the step this invocation stops at
@@ -244,7 +265,10 @@ def _set_up(
     sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
     stop = stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, announce=rank == 0)
     model, optimizer, scheduler = _build(cfg, total, device)
-    step = _restore(out / LAST, model, optimizer, scheduler, cfg.data.obj_id) if resume else 0
+    precision = Precision(o.amp, device)
+    step = _restore(out / LAST, model, optimizer, scheduler, precision, cfg.data.obj_id) if resume else 0
+    if rank == 0:
+        tqdm.write(f"precision: {precision.label} (optim.amp {o.amp})")
     return _Run(
         cfg=cfg,
         model=model,
@@ -256,6 +280,7 @@ def _set_up(
         pm=pm_loss_points(dataset.obj, device),
         loader=_loader(dataset, sampler, cfg.data.workers, device),
         device=device,
+        precision=precision,
         world=world,
         step=step,
         stop=stop,
@@ -310,7 +335,12 @@ def _build(
 
 
 def _restore(
-    path: Path, model: PoseNet, optimizer: torch.optim.Optimizer, scheduler: LambdaLR, obj_id: int
+    path: Path,
+    model: PoseNet,
+    optimizer: torch.optim.Optimizer,
+    scheduler: LambdaLR,
+    precision: Precision,
+    obj_id: int,
 ) -> int:
     """Load a checkpoint of the same network configuration and object into the run; returns its step."""
     state = load_checkpoint(path)
@@ -321,6 +351,8 @@ def _restore(
     model.load_state_dict(state["model"])
     optimizer.load_state_dict(state["optimizer"])
     scheduler.load_state_dict(state["scheduler"])
+    if state.get("grad_scaler"):  # an fp16 run's loss scale
+        precision.scaler.load_state_dict(state["grad_scaler"])
     return int(state["step"])
 
 
@@ -334,6 +366,8 @@ def _checkpoint(run: _Run) -> dict[str, Any]:
         "model_config": run.model.config_dict(),
         "config": run.cfg.to_dict(),
         "world_size": run.world,
+        "amp": run.precision.mode,
+        "grad_scaler": run.precision.scaler.state_dict(),
         "object": {"extent": run.dataset.obj.extent.tolist(), "diameter": run.dataset.obj.diameter},
     }
 
@@ -361,7 +395,7 @@ def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
     processes and logged."""
     tic = time.perf_counter()
     for batch in run.loader:
-        values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm, run.cfg)
+        values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm, run.cfg, run.precision)
         lr = run.optimizer.param_groups[0]["lr"]
         run.scheduler.step()
         run.step += 1

@@ -9,7 +9,15 @@ import torch
 
 from posenet.config import LossConfig
 from posenet.geometry import ego_to_allo, mat_to_rot6d, site_encode
-from posenet.losses import PmObject, coord_loss, mask_loss, pm_loss, pose_losses, region_loss
+from posenet.losses import (
+    PmObject,
+    coord_loss,
+    mask_loss,
+    mask_probability,
+    pm_loss,
+    pose_losses,
+    region_loss,
+)
 from posenet.metrics import (
     ESA_THETA_Q_DEG,
     TURNED_DEG,
@@ -96,7 +104,10 @@ def test_mask_loss_kinds() -> None:
     target = torch.tensor([[[[1.0, 0.0]]]])
     logits = torch.tensor([[[[0.0, 0.0]]]])
     assert math.isclose(float(mask_loss(logits, target, "bce")), math.log(2), rel_tol=1e-6)
-    assert math.isclose(float(mask_loss(logits, target, "l1")), 0.5, rel_tol=1e-6)
+    raw = torch.tensor([[[[2.0, -1.0]]]])  # GDR-Net's L1 takes the raw channel, not its sigmoid
+    assert math.isclose(float(mask_loss(raw, target, "l1")), (1.0 + 1.0) / 2, rel_tol=1e-6)
+    assert mask_probability(raw, "l1").tolist() == [[[[1.0, 0.0]]]]
+    assert mask_probability(raw, "bce").flatten().tolist() == pytest.approx([0.8808, 0.2689], abs=1e-4)
 
 
 def test_region_loss_is_uniform_cross_entropy_at_zero_logits() -> None:

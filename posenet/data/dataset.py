@@ -163,8 +163,8 @@ def open_split(
     """The Dataset of one split of the dataset folder `root` (every check of the folder happens here).
 
     Both modes keep every instance with a visible pixel, restricted to `image_ids` when given; training
-    also drops instances visible by no more than `min_visib_fract` (GDR-Net used 0.3), so with the
-    default 0 it trains on every instance evaluation scores.
+    also drops instances visible by no more than `min_visib_fract` (GDR-Net's configs use 0.0, or 0.2 for
+    YCB-V; 0.3 is GDRNPP's), so with the default 0 it trains on every instance evaluation scores.
     """
     obj = load_object_model(root, cfg.obj_id, model_cfg.num_regions, cfg.num_pm_points)
     instances = [i for i in scan_split(root, split, cfg.obj_id) if i.px_count_visib > 0]
