@@ -266,6 +266,45 @@ def merge(out: Path, shards: tuple[Path, ...]) -> None:
 
 
 @main.command()
+@click.argument("dataset", type=click.Path(path_type=Path))
+@click.option(
+    "--format",
+    "fmt",
+    required=True,
+    metavar="speedplus|coco",
+    help="speedplus: SPEED+'s camera.json, images and train/validation/test labels; "
+    "coco: one COCO instances file per split (masks as RLE, factors per image).",
+)
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="Folder to write (created; must be empty unless --overwrite).",
+)
+@click.option("--overwrite", is_flag=True, help="Replace a non-empty OUT.")
+@click.option(
+    "--images",
+    default=None,
+    metavar="copy|hardlink|symlink",
+    help="speedplus only: how the images get into OUT (default copy).",
+)
+@one_line_errors(ScgenError)
+def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | None) -> None:
+    """Export a dataset to SPEED+ or COCO, keeping its train/val/test split (docs/dataset.md).
+
+    \b
+    speedplus: OUT/camera.json, OUT/synthetic/images/, OUT/synthetic/{train,validation,test}.json
+    coco:      OUT/instances_{train,val,test}.json (file_name relative to DATASET)
+
+    Nothing is written when DATASET, --format or OUT is refused; OUT appears only once complete.
+    """
+    from scgen.export import export_dataset
+
+    counts = export_dataset(dataset, fmt, out, overwrite, images)
+    click.echo(f"{out}: {fmt} export of {dataset}, " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+
+
+@main.command()
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for preview.png.")
 @click.option("--n", "n", type=int, default=16, show_default=True, help="Number of samples (ids 0..n-1).")
 @scene_options

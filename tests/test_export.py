@@ -1,0 +1,189 @@
+"""`scgen export` on a real Mitsuba render, checked with the formats' own clients: pycocotools decodes and
+scores the COCO files; the SPEED+ poses, rebuilt by another route (scipy's quaternion, OpenCV's
+projection), land on the BOP pose's projection."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from pycocotools import mask as mask_utils
+from pycocotools.coco import COCO
+from pycocotools.cocoeval import COCOeval
+from scipy.spatial.transform import Rotation
+
+from scgen import bop
+from scgen.cli import main
+from scgen.dataset import Layout
+
+# SPEED+'s own camera.json distortion (k1, k2, p1, p2, k3), as a cam_dist the exporter must carry over
+SPEEDPLUS_DIST = [-0.22383016606510672, 0.5140979708255638, -0.0006649961199834066, -0.00021404771667484594,
+                  -0.13124227429077406]  # fmt: skip
+LABEL_FILES = {"train": "train.json", "val": "validation.json", "test": "test.json"}
+
+
+def export(*args: str) -> tuple[int, list[str]]:
+    result = CliRunner().invoke(main, ["export", *args])
+    return result.exit_code, [ln for ln in result.output.strip().splitlines() if ln]
+
+
+def splits(root: Path) -> dict[str, list[int]]:
+    return bop.read_json(root / "splits.json")["splits"]
+
+
+def bop_truth(root: Path) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """sample id -> (R, t in metres, K, cam_dist or zeros), read from the BOP scene files."""
+    out = {}
+    for split in splits(root):
+        for scene in bop.scene_dirs(root, split):
+            gt, cams = (bop.read_json(bop.scene_file(scene, n)) for n in ("scene_gt", "scene_camera"))
+            for key, entries in gt.items():
+                dist = np.asarray(cams[key].get("cam_dist", np.zeros(5)), np.float64)
+                out[int(key)] = (*bop.gt_pose(entries[0]), bop.camera_K(cams[key]), dist)
+    return out
+
+
+def project(V: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    uv, _ = cv2.projectPoints(V, cv2.Rodrigues(R)[0], t, K, dist)
+    return uv.reshape(-1, 2)
+
+
+def check_speedplus(root: Path, out: Path, dist: np.ndarray) -> None:
+    """The labels of every split hold the BOP poses in SPEED+'s convention, and the images are there."""
+    cam = bop.read_json(out / "camera.json")
+    truth = bop_truth(root)
+    K = truth[0][2]
+    assert np.array_equal(cam["cameraMatrix"], K) and np.array_equal(cam["distCoeffs"], dist)
+    assert (cam["Nu"], cam["Nv"], cam["ccx"], cam["ccy"]) == (320, 240, K[0, 2], K[1, 2])
+    assert (cam["fx"] / cam["ppx"], cam["fy"] / cam["ppy"]) == pytest.approx((K[0, 0], K[1, 1]))
+    V = np.asarray(bop.read_model_mesh(root, 1).vertices)
+    names, transposed = [], []
+    for split, ids in splits(root).items():
+        labels = bop.read_json(out / "synthetic" / LABEL_FILES[split])
+        assert [int(lab["filename"][3:9]) for lab in labels] == ids
+        for lab, sid in zip(labels, ids, strict=True):
+            R, t, K, d = truth[sid]
+            q, r = np.asarray(lab["q_vbs2tango_true"]), np.asarray(lab["r_Vo2To_vbs_true"])
+            # SPEED+'s client maps body to camera by quat2dcm(q)ᵀ, quat2dcm being the passive DCM (camera to
+            # body) of the scalar-first q: the transpose of the active rotation scipy builds from q
+            A = Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()
+            expected = project(V, R, t, K, d)
+            assert np.abs(project(V, A, r, K, np.asarray(cam["distCoeffs"])) - expected).max() < 1e-6
+            transposed.append(np.abs(project(V, A.T, r, K, d) - expected).max())
+            image = out / "synthetic" / "images" / lab["filename"]
+            assert image.read_bytes() == Layout(root).rgb(split, sid).read_bytes()
+            names.append(lab["filename"])
+    assert sorted(names) == sorted(p.name for p in (out / "synthetic" / "images").iterdir())
+    assert max(transposed) > 10.0  # the check sees the classic bug, a transposed quaternion
+
+
+def test_speedplus_poses_project_as_the_bop_poses(small_dataset: Path, tmp_path: Path):
+    out = tmp_path / "speedplus"
+    code, lines = export(str(small_dataset), "--format", "speedplus", "--out", str(out))
+    assert code == 0 and len(lines) == 1, lines
+    check_speedplus(small_dataset, out, np.zeros(5))  # no cam_dist: a pinhole camera
+
+
+@pytest.fixture(scope="module")
+def lens_dataset(small_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The small dataset with SPEED+'s lens written as every image's cam_dist (labels only: the pixels
+    stay those of a pinhole render)."""
+    root = tmp_path_factory.mktemp("lens") / "ds"
+    shutil.copytree(small_dataset, root)
+    for path in root.glob("*/[0-9]*/scene_camera.json"):
+        cams = bop.read_json(path)
+        path.write_text(json.dumps({k: {**v, "cam_dist": SPEEDPLUS_DIST} for k, v in cams.items()}))
+    return root
+
+
+@pytest.mark.parametrize("mode", ["hardlink", "symlink"])
+def test_speedplus_carries_cam_dist_and_links_images(lens_dataset: Path, tmp_path: Path, mode: str):
+    out = tmp_path / "speedplus"
+    assert export(str(lens_dataset), "--format", "speedplus", "--out", str(out), "--images", mode)[0] == 0
+    check_speedplus(lens_dataset, out, np.asarray(SPEEDPLUS_DIST))
+    image = next((out / "synthetic" / "images").iterdir())
+    assert image.is_symlink() == (mode == "symlink") and (mode == "symlink" or image.stat().st_nlink == 2)
+
+
+def test_coco_masks_boxes_and_factors_read_back_with_pycocotools(small_dataset: Path, tmp_path: Path):
+    out = tmp_path / "coco"
+    assert export(str(small_dataset), "--format", "coco", "--out", str(out))[0] == 0
+    layout = Layout(small_dataset)
+    with open(layout.metadata_path, newline="") as f:
+        rows = {int(r["sample_id"]): r for r in csv.DictReader(f)}
+    n_masks = 0
+    for split, ids in splits(small_dataset).items():
+        path = out / f"instances_{split}.json"
+        raw = bop.read_json(path)
+        assert all(isinstance(a["segmentation"]["counts"], str) for a in raw["annotations"])
+        coco = COCO(str(path))
+        assert sorted(coco.getImgIds()) == sorted(ids) and coco.getCatIds() == [1]
+        for sid in ids:
+            img = coco.loadImgs(sid)[0]
+            assert img["file_name"] == f"{split}/000000/rgb/{sid:06d}.png"
+            assert (small_dataset / img["file_name"]).is_file()
+            assert {k: str(img[k]) for k in rows[sid]} == rows[sid]  # every factor, as extra fields
+            visib = cv2.imread(str(layout.mask(split, sid, visib=True)), cv2.IMREAD_UNCHANGED) > 127
+            anns = coco.loadAnns(coco.getAnnIds(imgIds=sid))
+            assert len(anns) == int(visib.any())
+            for ann in anns:
+                decoded = coco.annToMask(ann).astype(bool)
+                assert np.array_equal(decoded, visib)
+                rle = ann["segmentation"]
+                assert ann["area"] == visib.sum() == mask_utils.area(rle)
+                assert ann["bbox"] == mask_utils.toBbox(rle).tolist() and ann["iscrowd"] == 0
+                n_masks += 1
+    assert n_masks >= 10
+    # the ground truth scored as detections by COCO's own evaluation: a perfect score
+    coco = COCO(str(out / "instances_train.json"))
+    for kind in ("bbox", "segm"):
+        dets = coco.loadRes([{**a, "score": 1.0} for a in coco.dataset["annotations"]])
+        ev = COCOeval(coco, dets, kind)
+        ev.evaluate(), ev.accumulate(), ev.summarize()
+        assert ev.stats[0] == pytest.approx(1.0)
+
+
+def test_bad_input_is_one_line_and_writes_nothing(small_dataset: Path, tmp_path: Path):
+    not_dataset = tmp_path / "photos"
+    not_dataset.mkdir()
+    (not_dataset / "a.png").write_bytes(b"")
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "keep.txt").write_text("mine")
+    out = tmp_path / "out"
+    cases = [
+        ([str(not_dataset), "--format", "coco", "--out", str(out)], str(not_dataset)),
+        ([str(small_dataset), "--format", "yolo", "--out", str(out)], "'yolo'"),
+        ([str(small_dataset), "--format", "coco", "--out", str(full)], f"{full} exists and is not empty"),
+        ([str(small_dataset), "--format", "coco", "--out", str(small_dataset / "coco")], "overlaps"),
+        ([str(small_dataset), "--format", "coco", "--out", str(out), "--images", "copy"], "speedplus only"),
+        ([str(small_dataset), "--format", "speedplus", "--out", str(out), "--images", "move"], "'move'"),
+    ]
+    for args, message in cases:
+        code, lines = export(*args)
+        assert code != 0 and len(lines) == 1 and message in lines[0], (args, lines)
+    assert not out.exists() and not (small_dataset / "coco").exists()
+    assert [p.name for p in full.iterdir()] == ["keep.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full", "photos"]  # no temporary left beside
+    assert export(str(small_dataset), "--format", "coco", "--out", str(full), "--overwrite")[0] == 0
+    assert sorted(p.name for p in full.iterdir()) == [f"instances_{s}.json" for s in ("test", "train", "val")]
+
+
+def test_a_failure_while_writing_leaves_out_untouched(small_dataset: Path, tmp_path: Path):
+    root = tmp_path / "ds"
+    shutil.copytree(small_dataset, root)
+    sid = splits(root)["test"][-1]
+    Layout(root).mask("test", sid, visib=True).unlink()
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "old.json").write_text("{}")
+    code, lines = export(str(root), "--format", "coco", "--out", str(out), "--overwrite")
+    assert code != 0 and len(lines) == 1 and f"sample {sid}" in lines[0], lines
+    assert [p.name for p in out.iterdir()] == ["old.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds", "out"]
