@@ -9,6 +9,7 @@ from typing import Any
 import torch
 
 from posenet.errors import PosenetError
+from posenet.models import ModelConfig
 from scgen.atomic import atomic_write_bytes
 
 REQUIRED = ("model", "model_config", "config", "step")
@@ -35,8 +36,9 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
 
 
 def check_model_config(state: dict[str, Any], expected: dict[str, Any], path: Path) -> None:
-    """Refuse a checkpoint written for another network configuration, naming the differing fields."""
-    found = state["model_config"]
+    """Refuse a checkpoint written for another network configuration, naming the differing fields. A field
+    the checkpoint predates (e.g. `head_norm`) stands for its default, which is what rebuilds it."""
+    found = {**ModelConfig().to_dict(), **state["model_config"]}
     if found != expected:
         diff = sorted(k for k in set(found) | set(expected) if found.get(k) != expected.get(k))
         detail = ", ".join(f"{k}: {found.get(k)!r} != {expected.get(k)!r}" for k in diff[:4])

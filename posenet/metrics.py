@@ -56,14 +56,15 @@ def add_error(R_pred: Tensor, t_pred: Tensor, R_gt: Tensor, t_gt: Tensor, points
 def adds_error(
     R_pred: Tensor, t_pred: Tensor, R_gt: Tensor, t_gt: Tensor, points: Tensor, max_block: int = 2**22
 ) -> Tensor:
-    """ADD-S: mean over predicted points of the distance to the closest GT-posed point.
+    """ADD-S as BOP's ADI (bop_toolkit's pose_error.adi): mean over the GT-posed points of the distance to
+    the closest point of the predicted pose.
 
-    Chunked over the predicted points so that one distance block holds at most `max_block` entries
-    (32 MB in float64) whatever the batch size.
+    Chunked over the GT points so that one distance block holds at most `max_block` entries (32 MB in
+    float64) whatever the batch size.
     """
     pred, gt = _transform(R_pred, t_pred, points), _transform(R_gt, t_gt, points)
-    chunk = max(1, max_block // gt[..., 0].numel())
-    nearest = [torch.cdist(pred[..., i : i + chunk, :], gt).amin(-1) for i in range(0, pred.shape[-2], chunk)]
+    chunk = max(1, max_block // pred[..., 0].numel())
+    nearest = [torch.cdist(gt[..., i : i + chunk, :], pred).amin(-1) for i in range(0, gt.shape[-2], chunk)]
     return torch.cat(nearest, dim=-1).mean(-1)
 
 

@@ -6,6 +6,7 @@ import math
 
 import pytest
 import torch
+from scipy.spatial import cKDTree
 
 from posenet.config import LossConfig
 from posenet.geometry import ego_to_allo, mat_to_rot6d, site_encode
@@ -186,3 +187,20 @@ def test_add_splits_into_its_rotation_and_translation_causes() -> None:
     assert float(turned["add_m"]) > 0.15  # beyond 0.1 of the diameter 1 below
     s = summarise({k: shifted[k].tolist() + turned[k].tolist() for k in shifted}, 1.0, False)
     assert s["add_rot_0.1d"] == 0.5 and s["te_0.1d"] == 0.5 and s["add_0.1d"] == 0.0
+
+
+def test_adds_runs_from_each_gt_point_to_the_nearest_estimated_point_as_bop_adi() -> None:
+    """bop_toolkit's pose_error.adi: a KD-tree over the estimated points, queried with the GT points."""
+    g = torch.Generator().manual_seed(3)
+    pts = torch.rand(300, 3, generator=g, dtype=torch.float64) - 0.5
+    pts[:, 0] *= 4  # elongated, so that the two directions of the nearest-point mean differ
+    R_gt, t_gt = torch.eye(3, dtype=torch.float64), torch.tensor([0.0, 0.0, 3.0], dtype=torch.float64)
+    R_est, t_est = rot_z(35.0), torch.tensor([0.1, 0.0, 3.2], dtype=torch.float64)
+    est, gt = pts @ R_est.T + t_est, pts @ R_gt.T + t_gt
+    bop_adi = cKDTree(est.numpy()).query(gt.numpy(), k=1)[0].mean()
+    reverse = cKDTree(gt.numpy()).query(est.numpy(), k=1)[0].mean()
+    assert abs(bop_adi - reverse) > 0.01 * bop_adi
+    assert float(adds_error(R_est, t_est, R_gt, t_gt, pts)) == pytest.approx(bop_adi, rel=1e-12)
+    assert float(adds_error(R_est, t_est, R_gt, t_gt, pts, max_block=1000)) == pytest.approx(
+        bop_adi, rel=1e-12
+    )

@@ -12,6 +12,8 @@ import timm
 
 from posenet.errors import PosenetError
 
+from .layers import NORMS
+
 
 class Variant(NamedTuple):
     """What distinguishes one ablation row of the paper (Table 3) from another."""
@@ -71,6 +73,8 @@ class ModelConfig:
     input_res: int = 256
     output_res: int = 64
     head_channels: int = 256
+    # the geometric head's norm: 'gn' GroupNorm (GDRNPP's; the presets'), 'bn' BatchNorm (GDR-Net's)
+    head_norm: str = "gn"
     pnp_channels: int = 128
     num_regions: int = 64
     fc_dims: tuple[int, ...] = (1024, 256)
@@ -102,6 +106,7 @@ class ModelConfig:
             (self.pnp_channels % self.pgsa_heads == 0, "pnp_channels must be a multiple of pgsa_heads"),
             (all(k % 2 == 1 for k in self.mecs_kernels), "mecs_kernels must be odd"),
             (len(self.fc_dims) > 0, "fc_dims must not be empty"),
+            (self.head_norm in NORMS, f"head_norm must be one of {', '.join(NORMS)}"),
         )
         failed = [message for ok, message in rules if not ok]
         if failed:

@@ -4,21 +4,22 @@ from __future__ import annotations
 
 from torch import Tensor, nn
 
-from .layers import conv_gn_relu, group_norm
+from .layers import conv_norm_relu, norm2d
 
 
-def top_down_decoder(in_channels: int, channels: int) -> nn.Sequential:
-    """Deconv ×2 + 2 convs, then twice [bilinear ×2 + 2 convs]: 8×8 → 64×64 at the paper's sizes."""
+def top_down_decoder(in_channels: int, channels: int, norm: str) -> nn.Sequential:
+    """Deconv ×2 + 2 convs, then twice [bilinear ×2 + 2 convs]: 8×8 → 64×64 at the paper's sizes; each
+    followed by `norm` (layers.norm2d: GroupNorm, or GDR-Net's BatchNorm) and ReLU."""
     layers: list[nn.Module] = [
         nn.ConvTranspose2d(in_channels, channels, 3, 2, 1, output_padding=1, bias=False),
-        group_norm(channels),
+        norm2d(norm, channels),
         nn.ReLU(inplace=True),
-        conv_gn_relu(channels, channels),
-        conv_gn_relu(channels, channels),
+        conv_norm_relu(channels, channels, norm=norm),
+        conv_norm_relu(channels, channels, norm=norm),
     ]
     for _ in range(2):
-        layers += [nn.UpsamplingBilinear2d(scale_factor=2), conv_gn_relu(channels, channels)]
-        layers += [conv_gn_relu(channels, channels)]
+        layers += [nn.UpsamplingBilinear2d(scale_factor=2), conv_norm_relu(channels, channels, norm=norm)]
+        layers += [conv_norm_relu(channels, channels, norm=norm)]
     return nn.Sequential(*layers)
 
 
@@ -30,9 +31,11 @@ class GeoHead(nn.Module):
     cut the gradient reaching the backbone ~5x and slowed every head (docs/posenet.md).
     """
 
-    def __init__(self, in_channels: int, channels: int, num_regions: int, refine: nn.Module | None) -> None:
+    def __init__(
+        self, in_channels: int, channels: int, num_regions: int, refine: nn.Module | None, norm: str = "gn"
+    ) -> None:
         super().__init__()
-        self.decoder = top_down_decoder(in_channels, channels)
+        self.decoder = top_down_decoder(in_channels, channels, norm)
         self.refine = refine if refine is not None else nn.Identity()
         self.out = nn.Conv2d(channels, 1 + 3 + num_regions + 1, 1)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from .layers import conv_gn_relu
+from .layers import conv_norm_relu
 
 
 class PGSA(nn.Module):
@@ -38,7 +38,7 @@ class PGSA(nn.Module):
 class PatchPnP(nn.Module):
     """Three stride-2 conv-GN-ReLU blocks, [PGSA], flatten, FC stack with LeakyReLU, then rot6d and SITE.
 
-    PyTorch's default init, as the geometric head (see GeoHead).
+    GroupNorm, as GDR-Net's ConvPnPNet. PyTorch's default init, as the geometric head (see GeoHead).
     """
 
     def __init__(
@@ -51,9 +51,9 @@ class PatchPnP(nn.Module):
     ) -> None:
         super().__init__()
         self.encoder = nn.Sequential(
-            conv_gn_relu(in_channels, channels, stride=2),
-            conv_gn_relu(channels, channels, stride=2),
-            conv_gn_relu(channels, channels, stride=2),
+            conv_norm_relu(in_channels, channels, stride=2),
+            conv_norm_relu(channels, channels, stride=2),
+            conv_norm_relu(channels, channels, stride=2),
         )
         num_tokens = (in_res // 8) ** 2
         self.pgsa = PGSA(channels, num_tokens, pgsa_heads) if pgsa_heads else nn.Identity()

@@ -50,7 +50,9 @@ class PoseNet(nn.Module):
                 reduction=config.afr_reduction,
                 kernels=config.mecs_kernels,
             )
-        self.geo_head = GeoHead(self.backbone.out_channels, config.head_channels, config.num_regions, afr)
+        self.geo_head = GeoHead(
+            self.backbone.out_channels, config.head_channels, config.num_regions, afr, config.head_norm
+        )
         self.pnp = PatchPnP(
             in_channels=pnp_in_channels(config.num_regions),
             channels=config.pnp_channels,
