@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import statistics
+import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from posenet.errors import PosenetError
+from posenet.export import export_onnx, onnx_session, run_onnx
 from posenet.models import ModelConfig, PoseNet, create_model
 
 
@@ -23,6 +28,7 @@ class BenchRow:
     macs_g: float
     latency_ms: float
     fps: float
+    onnx_latency_ms: float | None = None  # the same forward through onnxruntime (CPU), when asked
 
 
 # Paper Table 4 (RTX 4090, batch 1); the paper's "FLOPs" are MACs (reference gdrnet.md §6).
@@ -73,9 +79,10 @@ def count_macs(model: PoseNet, inputs: tuple[torch.Tensor, torch.Tensor]) -> flo
 
 @torch.no_grad()
 def measure_latency_ms(
-    model: PoseNet, inputs: tuple[torch.Tensor, torch.Tensor], warmup: int, iters: int
+    model: Callable[..., Any], inputs: tuple[torch.Tensor, torch.Tensor], warmup: int, iters: int
 ) -> float:
-    """Median wall time of `iters` forwards after `warmup` untimed ones (device-synchronised)."""
+    """Median wall time of `iters` forwards of `model` (a network, or an onnxruntime graph's runner) after
+    `warmup` untimed ones (device-synchronised)."""
     sync = torch.cuda.synchronize if inputs[0].is_cuda else (lambda: None)
     for _ in range(warmup):
         model(*inputs)
@@ -89,17 +96,37 @@ def measure_latency_ms(
     return 1000 * statistics.median(times)
 
 
+def onnx_latency_ms(
+    model: PoseNet, inputs: tuple[torch.Tensor, torch.Tensor], warmup: int, iters: int
+) -> float:
+    """`measure_latency_ms` of the model exported to ONNX and run by onnxruntime on the CPU, with torch's
+    intra-op thread count."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "model.onnx"
+        export_onnx(model, path)
+        session = onnx_session(path)
+    return measure_latency_ms(lambda *x: run_onnx(session, *x), inputs, warmup, iters)
+
+
 def bench_variant(
-    name: str, preset: str, device: torch.device, warmup: int, iters: int, backbone: str | None = None
+    name: str,
+    preset: str,
+    device: torch.device,
+    warmup: int,
+    iters: int,
+    backbone: str | None = None,
+    onnx: bool = False,
 ) -> BenchRow:
     """Build variant `name` in `preset`'s configuration (on `backbone`, else the preset's) from random init
-    and measure it in eval mode: only the architecture, no weights are needed."""
+    and measure it in eval mode: only the architecture, no weights are needed. With `onnx` (CPU only),
+    also its latency through onnxruntime."""
     model = create_model(name, preset, **({"backbone": backbone} if backbone else {})).to(device).eval()
     inputs = dummy_inputs(model.config, device)
     params = sum(p.numel() for p in model.parameters())
     macs = count_macs(model, inputs)
     latency = measure_latency_ms(model, inputs, warmup, iters)
-    return BenchRow(name, model.config.backbone, params / 1e6, macs / 1e9, latency, 1000 / latency)
+    ort_ms = onnx_latency_ms(model, inputs, warmup, iters) if onnx else None
+    return BenchRow(name, model.config.backbone, params / 1e6, macs / 1e9, latency, 1000 / latency, ort_ms)
 
 
 def run_bench(
@@ -109,11 +136,14 @@ def run_bench(
     iters: int = 10,
     smoke: bool = False,
     backbone: str | None = None,
+    onnx: bool = False,
 ) -> list[BenchRow]:
-    """Bench each variant in turn, freeing it before the next."""
+    """Bench each variant in turn, freeing it before the next; `onnx` adds onnxruntime's latency (CPU)."""
+    if onnx and device.type != "cpu":
+        raise PosenetError("--onnx times onnxruntime on the CPU: bench with --device cpu")
     rows = []
     for name in names:
-        rows.append(bench_variant(name, "smoke" if smoke else "paper", device, warmup, iters, backbone))
+        rows.append(bench_variant(name, "smoke" if smoke else "paper", device, warmup, iters, backbone, onnx))
         if device.type == "cuda":
             torch.cuda.empty_cache()
     return rows
@@ -131,7 +161,8 @@ def format_report(rows: list[BenchRow], device: str, paper: dict[str, BenchRow] 
     header = "; (paper Table 4, RTX 4090)" if paper else ""
     lines = [
         f"device: {device}; batch 1; MACs = FLOPs/2 from torch.utils.flop_counter{header}",
-        f"{'variant':<11} {'backbone':<22} {'params M':>17} {'MACs G':>17} {'latency ms':>17} {'FPS':>17}",
+        f"{'variant':<11} {'backbone':<22} {'params M':>17} {'MACs G':>17} {'latency ms':>17} {'FPS':>17}"
+        + (f" {'onnxruntime ms':>17}" if any(r.onnx_latency_ms is not None for r in rows) else ""),
     ]
     for r in rows:
         p = paper.get(r.name)
@@ -139,6 +170,8 @@ def format_report(rows: list[BenchRow], device: str, paper: dict[str, BenchRow] 
             _cell(getattr(r, field), p and getattr(p, field), digits, bracket=bool(paper))
             for field, digits in (("params_m", 2), ("macs_g", 2), ("latency_ms", 1), ("fps", 2))
         ]
+        if r.onnx_latency_ms is not None:
+            cells.append(f"{r.onnx_latency_ms:7.1f} ({1000 / r.onnx_latency_ms:6.1f} FPS)")
         lines.append(f"{r.name:<11} {r.backbone:<22} " + " ".join(f"{c:>17}" for c in cells))
     by_name = {r.name: r for r in rows}
     if {"gdrnet", "gap-gdrnet"} <= by_name.keys():

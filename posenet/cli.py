@@ -19,8 +19,17 @@ from posenet.data.layout import scan_split
 from posenet.detect import detect_split, detection_entries
 from posenet.detector import load_detector_config
 from posenet.errors import PosenetError
-from posenet.evaluate import BATCH_SIZE, bop_results_csv, evaluate, format_table, json_record, summary_rows
+from posenet.evaluate import (
+    BATCH_SIZE,
+    bop_results_csv,
+    evaluate,
+    format_table,
+    json_record,
+    load_model,
+    summary_rows,
+)
 from posenet.evaluate import by_factor as run_by_factor
+from posenet.export import OPSET, export_onnx, max_difference, onnx_session
 from posenet.models import VARIANTS
 from posenet.train import train as run_train
 from posenet.train_detector import train_detector
@@ -266,6 +275,10 @@ def boxes(
 @click.option("--smoke", is_flag=True, help="Bench the reduced-width CPU presets instead of the paper's.")
 @click.option("--backbone", help="Any timm backbone with a stride-32 map, instead of the preset's.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Also write JSON.")
+@click.option(
+    "--onnx", is_flag=True, help="Also export each variant to ONNX and time it in onnxruntime (CPU)."
+)
+@one_line_errors(PosenetError, ScgenError)
 def bench(
     variants: tuple[str, ...],
     device: str,
@@ -275,18 +288,32 @@ def bench(
     smoke: bool,
     backbone: str | None,
     json_path: Path | None,
+    onnx: bool,
 ) -> None:
     """Params, MACs and batch-1 latency / FPS of the pose-network variants (architecture only, random
-    init: no weights needed)."""
+    init: no weights needed); with --onnx, onnxruntime's latency beside torch's."""
     if threads:
         torch.set_num_threads(threads)
     dev = resolve_device(device)
-    rows = run_bench(list(variants or VARIANTS), dev, warmup, iters, smoke, backbone)
+    rows = run_bench(list(variants or VARIANTS), dev, warmup, iters, smoke, backbone, onnx)
     label = device_label(dev)
     click.echo(format_report(rows, label, paper={} if smoke else PAPER))
     if json_path:
         payload = {"device": label, "variants": [asdict(r) for r in rows]}
         json_path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
+@main.command("export")
+@click.option("--ckpt", type=PATH, required=True, help="Pose checkpoint (last.pt).")
+@click.option("--onnx", "onnx_path", type=PATH, required=True, help="ONNX file to write.")
+@one_line_errors(PosenetError, ScgenError)
+def export_cmd(ckpt: Path, onnx_path: Path) -> None:
+    """Export a pose network to ONNX (opset 18, dynamic batch): inputs roi_img, roi_coord2d; outputs mask,
+    xyz, region, rot6d, site. Checks onnxruntime's outputs against torch's on a random batch of 2."""
+    model, _ = load_model(ckpt, torch.device("cpu"))
+    export_onnx(model, onnx_path)
+    diff = max_difference(model, onnx_session(onnx_path))
+    click.echo(f"onnx: {onnx_path} (opset {OPSET}, dynamic batch); max |onnxruntime - torch| = {diff:.2e}")
 
 
 @main.command()

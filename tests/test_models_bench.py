@@ -22,7 +22,8 @@ def test_bench_prints_table_and_writes_json(tmp_path: Path) -> None:
     assert payload["device"].startswith("cpu")
     assert [v["name"] for v in payload["variants"]] == ["gdrnet", "gap-gdrnet"]
     for row in payload["variants"]:
-        assert set(row) == {"name", "backbone", "params_m", "macs_g", "latency_ms", "fps"}
+        assert set(row) == {"name", "backbone", "params_m", "macs_g", "latency_ms", "fps", "onnx_latency_ms"}
+        assert row["onnx_latency_ms"] is None  # onnxruntime is timed with --onnx only
         assert row["backbone"] == "tf_efficientnet_lite0"  # the smoke preset's, for every variant
         assert row["params_m"] > 0 and row["macs_g"] > 0 and row["latency_ms"] > 0
         assert row["fps"] == 1000 / row["latency_ms"]
