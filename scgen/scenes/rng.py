@@ -10,7 +10,7 @@ import zlib
 
 import numpy as np
 
-FACTORS = ("pose", "distance", "position", "illumination", "shadow", "background", "occluders")
+FACTORS = ("pose", "distance", "position", "illumination", "shadow", "background", "occluders", "sky")
 
 
 def factor_rng(seed: int, index: int, factor: str) -> np.random.Generator:

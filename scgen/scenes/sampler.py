@@ -18,6 +18,7 @@ from scgen.scenes.geometry import (
 from scgen.scenes.placement import Blank, place_caster, place_occluder
 from scgen.scenes.rng import factor_rng
 from scgen.scenes.silhouette import CameraView, TargetShape, camera_view, sun_view
+from scgen.scenes.sky import sky_params
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, PropSpec, SceneSpec, SunSpec
 
 OCCLUDER_SHAPES = ("panel", "box", "rod", "debris", "arm")
@@ -65,6 +66,8 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
     background, clutter = _sample_background(
         factor_rng(seed, index, "background"), cfg["background"], camera, t, shape.radius, radius_px, sun_dir
     )
+    sky = sky_params(background.kind, cfg["background"], factor_rng(seed, index, "sky"), sun_dir)
+    background.params.update(sky)
     occ_group, occluders = _sample_occluders(
         factor_rng(seed, index, "occluders"), cfg["occluders"], view, t, shape.radius
     )
