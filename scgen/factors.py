@@ -20,12 +20,14 @@ SHADOW_LABELS = ("no", "yes")
 OCCLUSION_GROUPS = ("none", "slight", "moderate", "heavy")
 BACKGROUND_KINDS = ("clean", "complex", "earth", "cluttered")
 DISTANCE_GROUPS = ("near", "middle", "far")
+FINISH_GROUPS = ("nominal", "varied", "swapped")  # the target's finish (scgen.scenes.finish)
 FACTOR_GROUPS: dict[str, tuple[str, ...]] = {
     "illumination": ILLUMINATION_LEVELS,
     "shadow": SHADOW_LABELS,
     "occlusion": OCCLUSION_GROUPS,
     "background": BACKGROUND_KINDS,
     "distance": DISTANCE_GROUPS,
+    "finish": FINISH_GROUPS,
 }
 
 SHADOW_THRESHOLD = 0.05  # shadow label "yes" when >= 5 % of the lit, visible target is in cast shadow

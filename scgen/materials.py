@@ -22,6 +22,7 @@ class Material:
     anisotropic: float = 0.0
     detail: str = ""  # "crinkle", "cells" or ""
     ply_colour: tuple[int, int, int] = (128, 128, 128)
+    crinkle: float = 1.0  # factor on the crinkle's normal strength (a per-sample finish varies it)
 
 
 MATERIALS: dict[str, Material] = {
@@ -44,3 +45,30 @@ MATERIALS: dict[str, Material] = {
 PROP_MATERIALS = ("white_paint", "brushed_metal", "mli_silver", "dark_metal", "mli_gold", "solar_cell")
 CELLS_PER_SIZE = 40.0  # solar cells across the object (target diameter, or a prop's longest side)
 BUSBAR_COLOUR = (0.6, 0.6, 0.62)
+
+
+@dataclass(frozen=True)
+class FinishRange:
+    """How far a class's finish may vary from sample to sample (config finish.jitter scales each range
+    towards the nominal value: 0 keeps it, 1 uses it whole).
+
+    brightness: factor on the base colour, log-uniform; tint: largest relative change of each colour
+    channel; roughness and metallic: absolute ranges; detail: factor on the crinkle's normal strength
+    (MLI only).
+    """
+
+    brightness: tuple[float, float]
+    tint: float
+    roughness: tuple[float, float]
+    metallic: tuple[float, float]
+    detail: tuple[float, float] = (1.0, 1.0)
+
+
+FINISH_RANGES: dict[str, FinishRange] = {
+    "mli_gold": FinishRange((0.75, 1.1), 0.08, (0.3, 0.7), (1.0, 1.0), detail=(0.4, 1.8)),
+    "mli_silver": FinishRange((0.75, 1.05), 0.05, (0.25, 0.65), (1.0, 1.0), detail=(0.4, 1.8)),
+    "solar_cell": FinishRange((0.6, 1.8), 0.2, (0.08, 0.3), (0.0, 0.0)),
+    "white_paint": FinishRange((0.7, 1.05), 0.05, (0.4, 0.85), (0.0, 0.0)),
+    "brushed_metal": FinishRange((0.85, 1.05), 0.04, (0.25, 0.55), (1.0, 1.0)),
+    "dark_metal": FinishRange((0.6, 1.8), 0.1, (0.3, 0.7), (0.2, 0.8)),
+}

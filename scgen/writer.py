@@ -32,6 +32,7 @@ from scgen.exr import encode_xyz_exr
 from scgen.factors import occluder_config, spec_key
 from scgen.model import TargetModel
 from scgen.scenes.config import distance_range_m
+from scgen.scenes.finish import finish_group
 from scgen.scenes.geometry import matrix_to_quat
 from scgen.scenes.sky import sky_labels
 from scgen.scenes.spec import SceneSpec
@@ -42,7 +43,7 @@ METADATA_COLUMNS = (
     "sun_x", "sun_y", "sun_z", "shadow", "shadow_fraction", "shadow_caster", "occlusion", "r_occ",
     "visib_fract", "px_count_all", "px_count_visib", "requested_occlusion", "occluder_config", "n_occluders",
     "background", "distance_m", "tx", "ty", "tz", "qw", "qx", "qy", "qz", "viewpoint_cell", "combination_key",
-    "earth_lat_deg", "earth_lon_deg", "sky_ra_deg", "sky_dec_deg",
+    "finish", "earth_lat_deg", "earth_lon_deg", "sky_ra_deg", "sky_dec_deg",
 )  # fmt: skip
 
 
@@ -180,6 +181,7 @@ def build_record(
         "qz": q[3],
         "viewpoint_cell": viewpoint_cell(R, t),
         "combination_key": spec_key(spec),
+        "finish": finish_group(spec.finish),
         **sky_labels(spec.background.params),
     }
     return {

@@ -28,7 +28,7 @@ from scgen.buffers import TARGET_ID
 from scgen.model import TargetModel
 from scgen.render.blender_env import quiet_stdout
 from scgen.render.blender_frames import camera_matrix_world, intrinsics_from_K, light_matrix_world
-from scgen.render.blender_materials import build_materials, probe_material
+from scgen.render.blender_materials import build_materials, new_material, probe_material, set_finish
 from scgen.render.blender_settings import (
     SUN_ANGLE_RAD,
     QualityPreset,
@@ -39,6 +39,7 @@ from scgen.render.blender_settings import (
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, render_seed
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.props import prop_mesh
+from scgen.scenes.finish import finished
 from scgen.scenes.spec import CameraSpec, PropSpec, SceneSpec
 
 BEAUTY, PROBE, ALONE = "beauty", "probe", "alone"  # view layer names, prefixes of the EXR channels
@@ -72,6 +73,8 @@ class BlenderScene:
         self.beauty.world = self.aux.world = world
 
         self.materials = build_materials(bpy, model.diameter)
+        self._diameter = model.diameter
+        self._finishes: dict[str, Any] = {}  # the target's own materials, made as finishes need them
         self.target_coll = bpy.data.collections.new("target")
         self.props_coll = bpy.data.collections.new("props")
         for scene in (self.beauty, self.aux):
@@ -113,6 +116,7 @@ class BlenderScene:
         self.target.matrix_world = self._Matrix(spec.target.matrix.tolist())
         self._set_props(spec.props)
         self._set_lights(spec)
+        self._set_finish(spec.finish)
         self.beauty.cycles.seed = render_seed(spec)
 
     def render_beauty(self) -> dict[str, np.ndarray]:
@@ -135,13 +139,14 @@ class BlenderScene:
     def _target_object(self, model: TargetModel) -> Any:
         """One mesh object for the whole target, one material slot per material class in use."""
         bpy = self._bpy
-        names = sorted({material for material, _ in model.parts})
+        names = self.target_classes = sorted({material for material, _ in model.parts})
         offsets = np.cumsum([0] + [len(m.vertices) for _, m in model.parts])[:-1]
         vertices = np.concatenate([m.vertices for _, m in model.parts])
         faces = np.concatenate([m.faces + off for (_, m), off in zip(model.parts, offsets, strict=True)])
         slots = np.concatenate([np.full(len(m.faces), names.index(mat)) for mat, m in model.parts])
         mesh = bpy.data.meshes.new("target")
         set_triangles(mesh, vertices, faces)
+        self._slots = [self.materials[name] for name in names]  # what _set_finish last gave each slot
         for name in names:
             mesh.materials.append(self.materials[name])
         mesh.polygons.foreach_set("material_index", slots.astype(np.int32))
@@ -149,6 +154,21 @@ class BlenderScene:
         obj.pass_index = TARGET_ID
         self.target_coll.objects.link(obj)
         return obj
+
+    def _set_finish(self, finish: dict[str, dict]) -> None:
+        """The target's slots take the sample's finish (scgen.scenes.finish); nominal: the class materials."""
+        slots = self.target.data.materials
+        for k, cls in enumerate(self.target_classes):
+            mat = self.materials[cls]
+            if cls in finish:
+                material = finished(finish, cls)
+                name = f"target_{cls}_{finish[cls]['material']}"
+                if name not in self._finishes:
+                    self._finishes[name] = new_material(self._bpy, name, material, self._diameter)
+                mat = self._finishes[name]
+                set_finish(mat, material, self._diameter)
+            if self._slots[k] is not mat:  # only what a finish changed: the slots stay the caller's otherwise
+                slots[k] = self._slots[k] = mat
 
     def _sun(self, name: str, scene: Any, angle: float) -> Any:
         light = self._bpy.data.lights.new(name, "SUN")

@@ -17,8 +17,9 @@ from scgen.render.backgrounds import background_image, linear_to_srgb8
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, check_quality, render_seed
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_llvm import mitsuba_setup
-from scgen.render.mitsuba_materials import box_uv, build_bsdfs, texture_scale
+from scgen.render.mitsuba_materials import box_uv, build_bsdfs, finish_bsdf, texture_scale
 from scgen.render.props import prop_mesh
+from scgen.scenes.finish import finished
 from scgen.scenes.spec import SceneSpec
 
 QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
@@ -59,10 +60,7 @@ class MitsubaBackend:
         check_quality(quality)
         self.spp = QUALITY_SPP[quality]
         self.bsdfs = build_bsdfs()
-        self._target_uv = [
-            box_uv(np.asarray(mesh.vertices), np.asarray(mesh.faces), texture_scale(material, model.diameter))
-            for material, mesh in model.parts
-        ]
+        self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
 
     def close(self) -> None:
         pass
@@ -71,11 +69,14 @@ class MitsubaBackend:
         """Mitsuba meshes of the target parts and of the props, in the camera frame."""
         T = spec.target.matrix
         target, props = [], []
-        for k, ((material, mesh), uv) in enumerate(zip(self.model.parts, self._target_uv, strict=True)):
+        bsdfs = {cls: finish_bsdf(finished(spec.finish, cls)) for cls in spec.finish}  # the sample's finish
+        for k, (material, mesh) in enumerate(self.model.parts):
             m = mesh.copy()
             m.apply_transform(T)
-            target.append(_mesh(f"target{k}", np.asarray(m.vertices), np.asarray(m.faces), uv,
-                                self.bsdfs[material]))  # fmt: skip
+            drawn = spec.finish[material]["material"] if material in spec.finish else material
+            bsdf = bsdfs.get(material, self.bsdfs[material])
+            target.append(_mesh(f"target{k}", np.asarray(m.vertices), np.asarray(m.faces),
+                                self._part_uv(k, drawn), bsdf))  # fmt: skip
         for k, prop in enumerate(spec.props):
             m = prop_mesh(prop)
             local = (np.asarray(m.vertices) - prop.pose.t_vec) @ prop.pose.R_mat  # UVs stick to the prop
@@ -83,6 +84,14 @@ class MitsubaBackend:
             props.append(_mesh(f"prop{k}", np.asarray(m.vertices), np.asarray(m.faces), uv,
                                self.bsdfs[prop.material]))  # fmt: skip
         return target, props
+
+    def _part_uv(self, k: int, material: str) -> np.ndarray:
+        """Target part k's UVs, scaled for the material class it is rendered with."""
+        if (k, material) not in self._uv:
+            mesh = self.model.parts[k][1]
+            scale = texture_scale(material, self.model.diameter)
+            self._uv[k, material] = box_uv(np.asarray(mesh.vertices), np.asarray(mesh.faces), scale)
+        return self._uv[k, material]
 
     def render(self, spec: SceneSpec) -> Buffers:
         target, props = self._shapes(spec)

@@ -9,23 +9,24 @@ Only shading changes: the geometry (and so every label) is the same triangles as
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import mitsuba as mi
 import numpy as np
 
-from scgen.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS
+from scgen.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
 
 CRINKLE_TILES_PER_SIZE = 2.0  # a tile spans half the object: no visible repetition on a face
 TEXTURE_SEED = 2024  # the detail textures are fixed assets, identical for every sample
+CRINKLE_SLOPE = 0.02  # the nominal crinkle's height-gradient scale
 
 
-def crinkle_normal_map(size: int = 512, waves: int = 64, slope: float = 0.02) -> np.ndarray:
-    """A tileable tangent-space normal map (size x size x 3 in [0, 1]) of crumpled foil.
-
-    Ridged sum of random integer-frequency plane waves (2 to 14 per tile, so about 4 to 28 creases
-    per object size): creases where a wave crosses zero. `slope` scales the height gradient.
-    """
+@functools.cache
+def _crinkle_gradient(size: int = 512, waves: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """Height gradient (d/dx, d/dy per tile) of crumpled foil: a ridged sum of random integer-frequency
+    plane waves (2 to 14 per tile, so about 4 to 28 creases per object size), creased where a wave
+    crosses zero; tileable."""
     rng = np.random.default_rng(TEXTURE_SEED)
     y, x = np.mgrid[0:size, 0:size] / size
     h = np.zeros((size, size))
@@ -36,14 +37,23 @@ def crinkle_normal_map(size: int = 512, waves: int = 64, slope: float = 0.02) ->
         amp = 1.0 / max(1.0, float(np.hypot(kx, ky)))
         h -= amp * np.abs(np.sin(np.pi * (kx * x + ky * y) + rng.uniform(0, np.pi)))
     gy, gx = np.gradient(h, 1.0 / size)
-    n = np.stack([-slope * gx, -slope * gy, np.ones_like(h)], -1)
+    return gx, gy
+
+
+def crinkle_normal_map(slope: float = CRINKLE_SLOPE) -> np.ndarray:
+    """A tileable tangent-space normal map (512 x 512 x 3 in [0, 1]) of crumpled foil; `slope` scales
+    the height gradient (the crinkle's strength)."""
+    gx, gy = _crinkle_gradient()
+    n = np.stack([-slope * gx, -slope * gy, np.ones_like(gx)], -1)
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
     return (0.5 * n + 0.5).astype(np.float32)
 
 
-def cell_texture(size: int = 64) -> np.ndarray:
-    """One solar cell (a tile): dark blue with a light frame and two busbars, linear RGB."""
-    tex = np.tile(np.asarray(MATERIALS["solar_cell"].base, np.float32), (size, size, 1))
+def cell_texture(
+    base: tuple[float, float, float] = MATERIALS["solar_cell"].base, size: int = 64
+) -> np.ndarray:
+    """One solar cell (a tile): the cell colour `base` with a light frame and two busbars, linear RGB."""
+    tex = np.tile(np.asarray(base, np.float32), (size, size, 1))
     line = max(1, size // 32)
     for a in (slice(0, line), slice(size - line, size)):
         tex[a, :] = BUSBAR_COLOUR
@@ -65,16 +75,17 @@ def _principled(base: Any, roughness: float, metallic: float = 0.0, **extra: flo
 
 def build_bsdfs() -> dict[str, mi.BSDF]:
     """One BSDF object per material class, built once per backend and shared by every mesh."""
-    crinkle = _bitmap(crinkle_normal_map(), raw=True)
-    cells = _bitmap(cell_texture(), raw=False)
-    dicts = {}
-    for name, m in MATERIALS.items():
-        base = cells if m.detail == "cells" else m.base
-        bsdf = _principled(base, m.roughness, m.metallic, specular=m.specular, anisotropic=m.anisotropic)
-        dicts[name] = (
-            {"type": "normalmap", "normalmap": crinkle, "bsdf": bsdf} if m.detail == "crinkle" else bsdf
-        )
-    return {name: mi.load_dict(d) for name, d in dicts.items()}
+    return {name: finish_bsdf(m) for name, m in MATERIALS.items()}
+
+
+def finish_bsdf(m: Material) -> mi.BSDF:
+    """The BSDF of a material (a class's nominal finish or a sample's draw), details included."""
+    base = _bitmap(cell_texture(m.base), raw=False) if m.detail == "cells" else m.base
+    bsdf = _principled(base, m.roughness, m.metallic, specular=m.specular, anisotropic=m.anisotropic)
+    if m.detail == "crinkle":
+        normals = _bitmap(crinkle_normal_map(CRINKLE_SLOPE * m.crinkle), raw=True)
+        bsdf = {"type": "normalmap", "normalmap": normals, "bsdf": bsdf}
+    return mi.load_dict(bsdf)
 
 
 def texture_scale(material: str, size: float) -> float:

@@ -17,6 +17,7 @@ import yaml
 
 from scgen.errors import ScgenError
 from scgen.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
+from scgen.scenes.finish import FINISH_MODES
 from scgen.scenes.spec import CameraSpec
 from scgen.sky_data import BLUE_MARBLE, HIPPARCOS, resolve_source
 
@@ -78,6 +79,11 @@ DEFAULT_CONFIG: dict[str, Any] = {
         "clutter_depth_factor": [1.4, 4.0],
         # clutter prop half-length in target projected radii (at the prop's depth)
         "clutter_size_rel": [0.6, 2.5],
+    },
+    "finish": {
+        "mode": "varied",  # or nominal: every part keeps its class's finish (scgen.scenes.finish)
+        "swap_prob": 0.1,  # per material class: becomes another class
+        "jitter": 1.0,  # share of scgen.materials.FINISH_RANGES used (0: nominal values)
     },
     "occluders": {
         "group_probs": {"none": 0.25, "slight": 0.25, "moderate": 0.25, "heavy": 0.25},
@@ -238,6 +244,7 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
     _check_prob("shadow.caster_prob", shadow["caster_prob"])
     _check_prob("occluders.distractor_prob", occ["distractor_prob"])
     _resolve_background(cfg["background"])
+    _check_finish(cfg["finish"])
     if not 0 <= cfg["illumination"]["max_phase_deg"] <= 180:
         raise ScgenError("illumination.max_phase_deg must lie in [0, 180]")
     for name in ("illumination.probs", "occluders.group_probs"):
@@ -299,6 +306,13 @@ def _check_range(name: str, value: Any, low: float) -> None:
 def _check_prob(name: str, p: Any) -> None:
     if not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
         raise ScgenError(f"{name} must be a probability in [0, 1], got {p!r}")
+
+
+def _check_finish(finish: dict[str, Any]) -> None:
+    if finish["mode"] not in FINISH_MODES:
+        raise ScgenError(f"finish.mode must be one of {', '.join(FINISH_MODES)}, got {finish['mode']!r}")
+    _check_prob("finish.swap_prob", finish["swap_prob"])
+    _check_prob("finish.jitter", finish["jitter"])
 
 
 def _check_distribution(name: str, probs: dict[str, float]) -> None:

@@ -10,7 +10,9 @@ import zlib
 
 import numpy as np
 
-FACTORS = ("pose", "distance", "position", "illumination", "shadow", "background", "occluders", "sky")
+FACTORS = (
+    "pose", "distance", "position", "illumination", "shadow", "background", "occluders", "sky", "finish",
+)  # fmt: skip
 
 
 def factor_rng(seed: int, index: int, factor: str) -> np.random.Generator:

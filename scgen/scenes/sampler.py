@@ -8,6 +8,7 @@ import numpy as np
 
 from scgen.materials import PROP_MATERIALS
 from scgen.scenes.config import USER_BACKGROUND, distance_range_m
+from scgen.scenes.finish import sample_finish
 from scgen.scenes.geometry import (
     backproject,
     orthonormal_basis,
@@ -85,6 +86,7 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
         props=tuple(occluders + caster + clutter),
         requested_occlusion=occ_group,
         shadow_caster=bool(caster),
+        finish=sample_finish(factor_rng(seed, index, "finish"), cfg["finish"]),
     )
 
 

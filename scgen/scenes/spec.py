@@ -130,6 +130,7 @@ class SceneSpec:
     props: tuple[PropSpec, ...]
     requested_occlusion: str
     shadow_caster: bool
+    finish: dict[str, dict[str, Any]] = field(default_factory=dict)  # scgen.scenes.finish; {}: nominal
 
     @property
     def occluders(self) -> tuple[PropSpec, ...]:
@@ -164,4 +165,5 @@ class SceneSpec:
             ),
             requested_occlusion=d["requested_occlusion"],
             shadow_caster=bool(d["shadow_caster"]),
+            finish=d.get("finish", {}),
         )

@@ -1,0 +1,108 @@
+"""The target's finish drawn per sample: its own stream, documented ranges, same labels, both backends."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+
+from scgen.buffers import BACKGROUND_ID
+from scgen.generator import Generator
+from scgen.materials import FINISH_RANGES, MATERIALS
+from scgen.render.backgrounds import srgb_to_linear
+from scgen.runner import RenderJob, run_render
+from scgen.scenes import load_config
+from scgen.scenes.finish import finish_group, finished, sample_finish
+from scgen.scenes.rng import factor_rng
+from scgen.stats import compute_stats
+
+TINY = (96, 72)
+SKY = {"earth_map": "procedural", "stars": "procedural"}
+
+
+def generator(finish: dict, backend: str = "mitsuba", seed: int = 5) -> Generator:
+    overrides = {"finish": finish, "background": SKY}
+    return Generator.load(seed=seed, resolution=TINY, backend=backend, quality="draft", camera="ideal",
+                          overrides=overrides)  # fmt: skip
+
+
+def test_draws_stay_in_their_documented_ranges_and_swap_at_their_rate():
+    cfg = {"mode": "varied", "swap_prob": 0.25, "jitter": 1.0}
+    draws = [sample_finish(factor_rng(1, i, "finish"), cfg) for i in range(400)]
+    assert draws[7] == sample_finish(factor_rng(1, 7, "finish"), cfg)  # a pure function of (seed, sample)
+    swaps = np.mean([f["material"] != cls for d in draws for cls, f in d.items()])
+    assert swaps == pytest.approx(0.25, abs=0.03)
+    for d in draws:
+        for cls, f in d.items():
+            r, nominal = FINISH_RANGES[f["material"]], MATERIALS[f["material"]]
+            assert r.roughness[0] <= f["roughness"] <= r.roughness[1]
+            assert r.metallic[0] <= f["metallic"] <= r.metallic[1]
+            assert r.detail[0] <= f["detail"] <= r.detail[1]
+            base = np.asarray(f["base"])
+            gain = base / np.asarray(nominal.base)
+            assert np.all(gain <= r.brightness[1] * (1 + r.tint) + 1e-9)
+            assert np.all((gain >= r.brightness[0] * (1 - r.tint) - 1e-9) | (base == 1.0))  # or clipped at 1
+            assert finished(d, cls).roughness == f["roughness"] and finished(d, cls).detail == nominal.detail
+    unjittered = sample_finish(factor_rng(1, 0, "finish"), {**cfg, "swap_prob": 0.0, "jitter": 0.0})
+    assert all(finished(unjittered, cls) == MATERIALS[cls] for cls in MATERIALS)
+    assert sample_finish(factor_rng(1, 0, "finish"), {**cfg, "mode": "nominal"}) == {}
+
+
+def test_varied_finish_changes_the_target_and_nothing_else():
+    nominal, varied = generator({"mode": "nominal"}), generator({"swap_prob": 0.5})
+    with nominal, varied:
+        changed = 0
+        for i in range(3):
+            a, b = nominal.sample(i), varied.sample(i)
+            assert a.spec == dataclasses.replace(b.spec, finish={})
+            assert finish_group(b.spec.finish) != "nominal"
+            for name in ("mask", "mask_visib", "xyz"):
+                assert np.array_equal(getattr(a.annotation, name), getattr(b.annotation, name)), name
+            for name in ("depth", "instance", "target_depth", "normal", "sun_blocked"):
+                assert np.array_equal(getattr(a.buffers, name), getattr(b.buffers, name)), name
+            target = a.annotation.mask_visib
+            near = cv2.dilate(target.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0  # the film filter
+            sky = (a.buffers.instance == BACKGROUND_ID) & ~near
+            assert np.array_equal(a.buffers.rgb[sky], b.buffers.rgb[sky])  # the background as it was
+            changed += int(np.abs(a.buffers.rgb[target].astype(int) - b.buffers.rgb[target]).mean() > 2)
+        assert changed >= 2
+
+
+def test_blender_and_mitsuba_render_the_same_draws():
+    """The finish moves each sample's target brightness the same way in both renderers (their BRDFs
+    differ in detail, so the log brightness changes are compared by correlation and mean)."""
+    close_up = {
+        "distance": {"min_px": 450.0, "max_px": 500.0},
+        "background": {**SKY, "probs": {"clean": 1.0}},
+        "occluders": {"group_probs": {"none": 1.0}, "distractor_prob": 0.0},
+        "shadow": {"caster_prob": 0.0},
+        "illumination": {"probs": {"normal": 1.0}},
+    }
+    change = {}
+    for backend in ("mitsuba", "blender"):
+        lum = []
+        for finish in ({"mode": "nominal"}, {"swap_prob": 0.0}):
+            with Generator.load(seed=5, resolution=TINY, backend=backend, quality="draft", camera="ideal",
+                                overrides={**close_up, "finish": finish}) as g:  # fmt: skip
+                samples = [g.sample(i) for i in range(6)]
+            lum.append([srgb_to_linear(s.buffers.rgb[s.annotation.mask_visib] / 255).mean() for s in samples])
+        change[backend] = np.log(np.divide(*lum[::-1]))
+    assert np.abs(change["mitsuba"]).max() > 0.15  # the draws are visible
+    assert np.corrcoef(change["mitsuba"], change["blender"])[0, 1] > 0.6, change
+    assert np.mean(change["mitsuba"]) == pytest.approx(np.mean(change["blender"]), abs=0.08), change
+
+
+def test_stats_groups_samples_by_finish(tmp_path):
+    cfg = load_config(overrides={"finish": {"swap_prob": 0.3}})
+    groups = [finish_group(sample_finish(factor_rng(0, i, "finish"), cfg["finish"])) for i in range(6)]
+    job = RenderJob(out=tmp_path / "ds", n=6, seed=0, backend="mitsuba", quality="draft", resolution=TINY,
+                    overrides={"finish": {"swap_prob": 0.3}, "background": SKY})  # fmt: skip
+    run_render(job, progress=False)
+    counts = {}
+    for split in compute_stats(tmp_path / "ds")["splits"].values():
+        for group, n in split["factors"]["finish"].items():
+            counts[group] = counts.get(group, 0) + n
+    assert counts == {g: groups.count(g) for g in ("nominal", "varied", "swapped")}
+    assert counts["nominal"] == 0 and counts["varied"] + counts["swapped"] == 6
