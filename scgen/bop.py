@@ -17,6 +17,8 @@ import numpy as np
 import trimesh
 
 from scgen.errors import ScgenError
+from scgen.scenes.lens import is_pinhole
+from scgen.scenes.spec import CameraSpec
 
 MM_PER_M = 1000.0
 CAMERA_FILE = "camera.json"
@@ -185,6 +187,14 @@ def gt_pose(entry: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
 def camera_K(entry: dict[str, Any]) -> np.ndarray:
     """The 3 x 3 intrinsics of a scene_camera.json entry."""
     return np.asarray(entry["cam_K"], dtype=np.float64).reshape(3, 3)
+
+
+def camera_spec(entry: dict[str, Any], width: int, height: int) -> CameraSpec:
+    """The camera of a scene_camera.json entry: cam_K and, where present, the lens' cam_dist."""
+    dist = tuple(float(k) for k in entry.get("cam_dist", ()))
+    K = tuple(float(k) for k in entry["cam_K"])
+    exposure_ev = float(entry.get("exposure_ev", 0.0))
+    return CameraSpec(width, height, K, exposure_ev, () if is_pinhole(dist) else dist)
 
 
 def models_info_entry(bounds_m: np.ndarray, diameter_m: float) -> dict[str, float]:

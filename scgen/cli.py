@@ -43,6 +43,9 @@ def scene_options(command: Callable[..., Any]) -> Callable[..., Any]:
                      help="Keep the mesh's own scale (metres) instead of a 0.2 m diameter."),
         click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,
                      help="TOML/YAML file overriding any sampling distribution (see docs/config.md)."),
+        click.option("--camera", "camera", default=None,
+                     help="Camera preset: ideal | default | speedplus (default: the config's camera.preset, "
+                          "else default). The config's camera table overrides it key by key."),
     ]  # fmt: skip
     for option in reversed(options):
         command = option(command)
@@ -112,6 +115,7 @@ def render(
     model_path,
     keep_scale,
     config_path,
+    camera,
     backgrounds_dir,
     resolution,
     quality,
@@ -136,7 +140,7 @@ def render(
     overrides = {"background": {"user_dir": str(backgrounds_dir)}} if backgrounds_dir else {}
     job = RenderJob(
         out=out, n=n, seed=seed, backend=backend, quality=quality, device=device, model_path=model_path,
-        keep_scale=keep_scale, config_path=config_path, resolution=res,
+        keep_scale=keep_scale, config_path=config_path, camera=camera, resolution=res,
         overrides=overrides, split_by=split_by,
         ratios=parse_ratios(split_text), shard=parse_shard(shard_text),
         workers=workers or os.cpu_count() or 1, executor=executor, ray_address=ray_address,
@@ -311,7 +315,7 @@ def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | No
 @click.option("--resolution", default="320x240", show_default=True, help="Image size WxH.")
 @click.option("--quality", default="draft", show_default=True, help="draft | default | high.")
 @one_line_errors(ScgenError)
-def preview(out, n, backend, seed, model_path, keep_scale, config_path, resolution, quality) -> None:
+def preview(out, n, backend, seed, model_path, keep_scale, config_path, camera, resolution, quality) -> None:
     """Render n samples in memory, as render would, and write OUT/preview.png: RGB, masks, xyz, factors."""
     from scgen.generator import Generator
     from scgen.preview import build_preview, save_png
@@ -324,6 +328,7 @@ def preview(out, n, backend, seed, model_path, keep_scale, config_path, resoluti
         seed,
         parse_resolution(resolution),
         keep_scale,
+        camera=camera,
         backend=backend,
         quality=quality,
     )

@@ -20,6 +20,8 @@ SHADOW_LABELS = ("no", "yes")
 OCCLUSION_GROUPS = ("none", "slight", "moderate", "heavy")
 BACKGROUND_KINDS = ("clean", "complex", "earth", "cluttered")
 DISTANCE_GROUPS = ("near", "middle", "far")
+NOISE_GROUPS = ("none", "low", "medium", "high")  # sensor noise by mid-grey SNR; none: no sensor model
+FLARE_LABELS = ("no", "yes")
 FINISH_GROUPS = ("nominal", "varied", "swapped")  # the target's finish (scgen.scenes.finish)
 FACTOR_GROUPS: dict[str, tuple[str, ...]] = {
     "illumination": ILLUMINATION_LEVELS,
@@ -27,11 +29,14 @@ FACTOR_GROUPS: dict[str, tuple[str, ...]] = {
     "occlusion": OCCLUSION_GROUPS,
     "background": BACKGROUND_KINDS,
     "distance": DISTANCE_GROUPS,
+    "noise": NOISE_GROUPS,
+    "flare": FLARE_LABELS,
     "finish": FINISH_GROUPS,
 }
 
 SHADOW_THRESHOLD = 0.05  # shadow label "yes" when >= 5 % of the lit, visible target is in cast shadow
 OCCLUSION_LIMITS = (("none", 0.0), ("slight", 0.2), ("moderate", 0.4))  # r_occ upper bounds; above: heavy
+NOISE_SNR_LIMITS = (("low", 30.0), ("medium", 15.0))  # mid-grey SNR lower bounds; below: high
 
 
 def shadow_label(shadow_fraction: float) -> str:
@@ -44,6 +49,16 @@ def occlusion_group(r_occ: float) -> str:
         if r_occ <= limit:
             return name
     return OCCLUSION_GROUPS[-1]
+
+
+def noise_group(mid_grey_snr: float | None) -> str:
+    """none (no sensor model), low (mid-grey SNR >= 30), medium (>= 15), high (< 15)."""
+    if mid_grey_snr is None:
+        return NOISE_GROUPS[0]
+    for name, limit in NOISE_SNR_LIMITS:
+        if mid_grey_snr >= limit:
+            return name
+    return NOISE_GROUPS[-1]
 
 
 def distance_groups(

@@ -49,13 +49,14 @@ class Generator:
     def load(
         cls, model: str | Path | None = None, config: str | Path | None = None, seed: int = 0,
         resolution: tuple[int, int] | None = None, keep_scale: bool = False,
-        overrides: dict[str, Any] | None = None, **render: Any,
+        overrides: dict[str, Any] | None = None, camera: str | None = None, **render: Any,
     ) -> Generator:  # fmt: skip
         """From files, as `scgen render` reads them: a mesh (None: the bundled spacecraft) and a config.
 
-        `render` takes the renderer settings: backend, quality, device, threads.
+        `camera` names a camera preset (scgen.scenes.camera_config); `render` takes the renderer
+        settings: backend, quality, device, threads.
         """
-        cfg = load_config(config, overrides, resolution)
+        cfg = load_config(config, overrides, resolution, camera)
         generator = cls(load_target(model, keep_scale=keep_scale), cfg, seed, **render)
         generator.model_source = (None if model is None else Path(model), keep_scale)
         return generator

@@ -44,6 +44,7 @@ class RenderJob:
     model_path: Path | None = None
     keep_scale: bool = False
     config_path: Path | None = None
+    camera: str | None = None  # camera preset (scgen.scenes.camera_config)
     overrides: dict[str, Any] = field(default_factory=dict)
     resolution: tuple[int, int] | None = None
     split_by: str = "factors"
@@ -98,10 +99,12 @@ def existing_parent(p: Path) -> Path:
 
 def make_plan(job: RenderJob) -> Plan:
     generator = Generator.load(
-        job.model_path, job.config_path, job.seed, job.resolution, job.keep_scale, job.overrides,
+        job.model_path, job.config_path, job.seed, job.resolution, job.keep_scale, job.overrides, job.camera,
         backend=job.backend, quality=job.quality, device=job.device,
         threads=job.threads or max(1, (os.cpu_count() or 1) // job.workers),
     )  # fmt: skip
+    if job.write.rgb_format == "jpg" and generator.cfg["camera"]["output"]["bits"] != 8:
+        raise ScgenError("--rgb-format jpg holds 8 bits only: camera.output.bits is 16 (use png)")
     specs = sample_all(generator, job.n, job.workers)
     keys = [spec_key(s) for s in specs]
     return Plan(generator, specs, plan_splits(keys, job.ratios, job.seed, job.split_by), keys)

@@ -18,8 +18,9 @@ from scgen.splits import SPLITS, view_direction
 
 
 def group_labels(rows: list[dict[str, str]]) -> dict[str, list[str]]:
-    """Each factor's group label for every row (distance thirds over these rows' range)."""
-    labels = {f: [r[f] for r in rows] for f in ("illumination", "shadow", "occlusion", "background")}
+    """Each factor's group label for every row (distance thirds over these rows' range); '-' where a
+    dataset from before a factor was recorded has no column for it."""
+    labels = {f: [r.get(f, "-") for r in rows] for f in FACTOR_GROUPS if f != "distance"}
     labels["distance"], _ = distance_groups(np.array([float(r["distance_m"]) for r in rows]))
     return labels
 

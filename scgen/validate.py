@@ -18,7 +18,7 @@ from scgen.dataset import OBJ_ID, Layout, open_dataset, read_metadata
 from scgen.errors import ScgenError
 from scgen.exr import read_xyz_exr
 from scgen.model import EVAL_MAX_EDGE_FRAC
-from scgen.scenes.geometry import project
+from scgen.scenes.spec import CameraSpec
 from scgen.writer import dataset_target, target_lists
 
 REPROJ_TOL_PX = 0.5
@@ -154,7 +154,8 @@ def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], 
     if rec["scene_camera"]["depth_scale"] != depth_scale:
         out.append(f"depth_scale {rec['scene_camera']['depth_scale']} != camera.json's {depth_scale}")
     R, t = bop.gt_pose(rec["scene_gt"][0])
-    whole = full_projection(mask, bop.camera_K(rec["scene_camera"]), vertices @ R.T + t, faces)
+    camera = bop.camera_spec(rec["scene_camera"], mask.shape[1], mask.shape[0])
+    whole = full_projection(mask, camera, vertices @ R.T + t, faces)
     valid = int(mask.sum()) if depth is None else int((mask & (depth > 0)).sum())
     out += check_gt_info(info, visib, whole, valid)
     if info["xyz_box"] is None:
@@ -222,10 +223,10 @@ def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: d
               lo: np.ndarray, hi: np.ndarray) -> list[str]:  # fmt: skip
     """xyz must reproject onto its own pixels and lie inside the model's bounding box."""
     R, t = bop.gt_pose(rec["scene_gt"][0])
-    K = bop.camera_K(rec["scene_camera"])
+    camera = bop.camera_spec(rec["scene_camera"], *vis.shape[::-1])
     vs, us = np.nonzero(vis)
     C = crop[vs, us].astype(np.float64)
-    err = reprojection_error(C, us + offset[0], vs + offset[1], K, R, t)
+    err = reprojection_error(C, us + offset[0], vs + offset[1], camera, R, t)
     out = []
     share = float((err <= REPROJ_TOL_PX).mean()) if len(err) else 1.0
     if share < REPROJ_MIN_SHARE:
@@ -237,10 +238,11 @@ def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: d
     return out
 
 
-def reprojection_error(C: np.ndarray, u: np.ndarray, v: np.ndarray, K: np.ndarray, R: np.ndarray,
+def reprojection_error(C: np.ndarray, u: np.ndarray, v: np.ndarray, camera: CameraSpec, R: np.ndarray,
                        t: np.ndarray) -> np.ndarray:  # fmt: skip
-    """Pixel distance between K(R C + t) and the pixel centres (u, v) the coordinates were stored at."""
-    uv = project(K, C @ R.T + t)
+    """Pixel distance between the projection of R C + t (through the lens, if any) and the pixel centres
+    (u, v) the coordinates were stored at."""
+    uv = camera.project(C @ R.T + t)
     return np.hypot(uv[:, 0] - u, uv[:, 1] - v)
 
 
@@ -325,7 +327,8 @@ def check_bop_xyz(scene: Path, image: BopImage, k: int, visib: np.ndarray, info:
     if len(vs) == 0:
         return out
     C = crop[vs, us].astype(np.float64)
-    err = reprojection_error(C, us + x, vs + y, np.asarray(image.K).reshape(3, 3), *pose)
+    camera = bop.camera_spec({"cam_K": image.K}, *visib.shape[::-1])
+    err = reprojection_error(C, us + x, vs + y, camera, *pose)
     share = float((err <= REPROJ_TOL_PX).mean())
     if share < REPROJ_MIN_SHARE:
         out.append(f"xyz reprojects within {REPROJ_TOL_PX} px for only {share:.1%} of visible pixels")

@@ -26,16 +26,17 @@ from scgen.annotate import Annotation
 from scgen.annotate.annotate import full_projection
 from scgen.atomic import atomic_write_bytes, atomic_write_text
 from scgen.bop import read_json
-from scgen.buffers import Buffers
+from scgen.buffers import Buffers, CameraRecord
 from scgen.dataset import CHUNK, OBJ_ID, Layout, dumps
 from scgen.exr import encode_xyz_exr
-from scgen.factors import occluder_config, spec_key
+from scgen.factors import FLARE_LABELS, noise_group, occluder_config, spec_key
 from scgen.model import TargetModel
 from scgen.scenes.config import distance_range_m
 from scgen.scenes.finish import finish_group
 from scgen.scenes.geometry import matrix_to_quat
+from scgen.scenes.imaging import IDEAL_IMAGING, mid_grey_snr
 from scgen.scenes.sky import sky_labels
-from scgen.scenes.spec import SceneSpec
+from scgen.scenes.spec import CameraSpec, SceneSpec
 from scgen.splits import viewpoint_cell
 
 METADATA_COLUMNS = (
@@ -43,6 +44,8 @@ METADATA_COLUMNS = (
     "sun_x", "sun_y", "sun_z", "shadow", "shadow_fraction", "shadow_caster", "occlusion", "r_occ",
     "visib_fract", "px_count_all", "px_count_visib", "requested_occlusion", "occluder_config", "n_occluders",
     "background", "distance_m", "tx", "ty", "tz", "qw", "qx", "qy", "qz", "viewpoint_cell", "combination_key",
+    "camera", "noise", "noise_gain", "mid_grey_snr", "psf_fwhm_px", "motion_blur_px", "motion_blur_deg",
+    "vignetting", "chromatic_px", "flare", "saturated",
     "finish", "earth_lat_deg", "earth_lon_deg", "sky_ra_deg", "sky_dec_deg",
 )  # fmt: skip
 
@@ -86,12 +89,14 @@ def encode_png(img: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
-def encode_rgb(rgb: np.ndarray, fmt: str) -> bytes:
+def encode_rgb(image: np.ndarray, fmt: str, jpeg_quality: int = 95) -> bytes:
+    """The recorded image's file: RGB (H x W x 3) or one channel (H x W), 8 or 16 bits (PNG only)."""
+    bgr = image[..., ::-1] if image.ndim == 3 else image
     if fmt == "jpg":
-        ok, buf = cv2.imencode(".jpg", rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 95])
+        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
         assert ok
         return buf.tobytes()
-    return encode_png(rgb[..., ::-1])
+    return encode_png(bgr)
 
 
 def write_sample(
@@ -106,7 +111,8 @@ def write_sample(
     }
     for p in paths.values():
         p.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(paths["rgb"], encode_rgb(buffers.rgb, opts.rgb_format))
+    quality = spec.imaging.jpeg_quality if spec.imaging else 95
+    atomic_write_bytes(paths["rgb"], encode_rgb(buffers.rgb, opts.rgb_format, quality))
     atomic_write_bytes(paths["mask"], encode_png(ann.mask.astype(np.uint8) * 255))
     atomic_write_bytes(paths["mask_visib"], encode_png(ann.mask_visib.astype(np.uint8) * 255))
     xyz_box = None
@@ -123,29 +129,34 @@ def write_sample(
         depth_path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(depth_path, encode_png(depth))
     vertices_cam = vertices @ spec.target.R_mat.T + spec.target.t_vec
-    gt_info = gt_info_entry(spec.camera.K_mat, ann, vertices_cam, faces, depth, xyz_box)
-    record = build_record(spec, ann, split, gt_info, depth_scale)
+    gt_info = gt_info_entry(spec.camera, ann, vertices_cam, faces, depth, xyz_box)
+    record = build_record(spec, ann, split, gt_info, depth_scale, buffers.camera)
     record_path = layout.record(split, sid)
     record_path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(record_path, dumps(record))
     return record
 
 
-def gt_info_entry(K: np.ndarray, ann: Annotation, vertices_cam: np.ndarray, faces: np.ndarray,
+def gt_info_entry(camera: CameraSpec, ann: Annotation, vertices_cam: np.ndarray, faces: np.ndarray,
                   depth: np.ndarray, xyz_box: list[int] | None) -> dict[str, Any]:  # fmt: skip
     """The scene_gt_info.json entry of a rendered sample: the whole projection measured by
     `full_projection`, px_count_valid = silhouette pixels inside the image with a depth value."""
-    px_count_all, bbox_obj = full_projection(ann.mask, K, vertices_cam, faces)
+    px_count_all, bbox_obj = full_projection(ann.mask, camera, vertices_cam, faces)
     return bop.gt_info_entry(
         px_count_all, bbox_obj, ann.mask_visib, int((ann.mask & (depth > 0)).sum()), xyz_box
     )
 
 
 def build_record(
-    spec: SceneSpec, ann: Annotation, split: str, gt_info: dict[str, Any], depth_scale: float
-) -> dict[str, Any]:
-    """Everything finalize needs for the BOP JSON files and the metadata row of one sample."""
+    spec: SceneSpec, ann: Annotation, split: str, gt_info: dict[str, Any], depth_scale: float,
+    camera: CameraRecord | None = None,
+) -> dict[str, Any]:  # fmt: skip
+    """Everything finalize needs for the BOP JSON files and the metadata row of one sample; `camera`: what
+    the camera stage decided (None: the base exposure, no flare)."""
     R, t = spec.target.R_mat, spec.target.t_vec
+    imaging = spec.imaging or IDEAL_IMAGING
+    exposure_ev = camera.exposure_ev if camera else spec.camera.exposure_ev
+    snr = mid_grey_snr(imaging.camera, imaging.gain)
     q = matrix_to_quat(R)
     sun = spec.sun.direction
     meta = {
@@ -155,7 +166,7 @@ def build_record(
         "im_id": spec.index,
         "illumination": spec.sun.level,
         "sun_irradiance_w_m2": spec.sun.irradiance,
-        "exposure_ev": spec.camera.exposure_ev,
+        "exposure_ev": exposure_ev,
         "sun_x": sun[0],
         "sun_y": sun[1],
         "sun_z": sun[2],
@@ -181,15 +192,28 @@ def build_record(
         "qz": q[3],
         "viewpoint_cell": viewpoint_cell(R, t),
         "combination_key": spec_key(spec),
+        "camera": imaging.camera["preset"],
+        "noise": noise_group(snr),
+        "noise_gain": imaging.gain,
+        "mid_grey_snr": "" if snr is None else snr,
+        "psf_fwhm_px": imaging.psf_fwhm_px,
+        "motion_blur_px": imaging.motion_blur_px,
+        "motion_blur_deg": imaging.motion_blur_deg,
+        "vignetting": imaging.vignetting,
+        "chromatic_px": imaging.chromatic_px,
+        "flare": FLARE_LABELS[int(bool(camera and camera.flare))],
+        "saturated": camera.saturated if camera else 0.0,
         "finish": finish_group(spec.finish),
         **sky_labels(spec.background.params),
     }
+    scene_camera = {"cam_K": list(spec.camera.K), "depth_scale": depth_scale, "exposure_ev": exposure_ev}
+    if not spec.camera.pinhole:
+        scene_camera["cam_dist"] = list(spec.camera.dist)
     return {
         "sample_id": spec.index,
         "split": split,
         "scene_gt": [bop.gt_entry(R, t, OBJ_ID)],
-        "scene_camera": {"cam_K": list(spec.camera.K), "depth_scale": depth_scale,
-                         "exposure_ev": spec.camera.exposure_ev},
+        "scene_camera": scene_camera,
         "scene_gt_info": [gt_info],
         "metadata": meta,
         "spec": spec.to_dict(),

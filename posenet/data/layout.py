@@ -88,6 +88,12 @@ def _scan_scene(scene: Path, split: str, obj_id: int, size: tuple[int, int]) -> 
             )
             if rgb is None:
                 continue  # a sample still being written: nothing to train or test on yet
+            if any(cams[im_key].get("cam_dist", ())):
+                raise PosenetError(
+                    f"{scene}: image {im_id} was taken through a lens with distortion (cam_dist "
+                    f"{cams[im_key]['cam_dist']}); posenet's crops and SITE assume a pinhole camera: render "
+                    "with a pinhole camera (scgen render --camera default) or undistort the images first"
+                )
             K = bop.camera_K(cams[im_key])
             for inst, (ann, info) in enumerate(zip(gt[im_key], infos[im_key], strict=True)):
                 if int(ann["obj_id"]) == obj_id:

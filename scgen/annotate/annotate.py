@@ -12,7 +12,6 @@ import numpy as np
 from scgen import bop
 from scgen.buffers import TARGET_ID, Buffers
 from scgen.factors import occlusion_group, shadow_label
-from scgen.scenes.geometry import project
 from scgen.scenes.spec import CameraSpec, SceneSpec
 
 Box = tuple[int, int, int, int]  # x, y, w, h in pixels; may reach past the image
@@ -58,20 +57,20 @@ def mask_bbox(mask: np.ndarray) -> list[int]:
     return [int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)]
 
 
-def full_projection(mask: np.ndarray, K: np.ndarray, vertices_cam: np.ndarray,
+def full_projection(mask: np.ndarray, camera: CameraSpec, vertices_cam: np.ndarray,
                     faces: np.ndarray) -> tuple[int, list[int]]:  # fmt: skip
     """(px_count_all, bbox_obj) of the target's whole silhouette, measured as bop_toolkit's calc_gt_info
     does: on its canvas reaching one image size past each border (bop.gt_info_canvas), BOP box.
 
-    Inside the image (H x W, intrinsics K) the silhouette is `mask` (the renderer's target-alone pass);
-    past the border it is the pixel centres covered by the projected triangles (`vertices_cam`: the
-    posed mesh, camera frame), which is where a ray cast through them would hit. Triangles not wholly
-    in front of the camera are left out: they cannot be projected. Only samples the image cuts need
-    the raster.
+    Inside the image (H x W) the silhouette is `mask` (the renderer's target-alone pass); past the border
+    it is the pixel centres covered by the projected triangles (`vertices_cam`: the posed mesh, camera
+    frame), which is where a ray cast through them would hit (with a lens: through their projected
+    corners, straight-edged). Triangles not wholly in front of the camera are left out: they cannot be
+    projected. Only samples the image cuts need the raster.
     """
     H, W = mask.shape
     front = faces[(vertices_cam[faces, 2] > 0).all(axis=1)]
-    tri = project(K, vertices_cam[front.ravel()]).reshape(-1, 3, 2)
+    tri = camera.project(vertices_cam[front.ravel()]).reshape(-1, 3, 2)
     lo, hi = np.ceil(tri.min(axis=1)), np.floor(tri.max(axis=1))  # the pixel centres each may cover
     reach_out = (lo < 0).any(axis=1) | (hi > [W - 1, H - 1]).any(axis=1)
     if not reach_out.any():

@@ -3,12 +3,12 @@
 Both backends render the foreground over a transparent film and composite it over these, so
 the backgrounds are the same image whatever the renderer. Kinds:
 - clean: black space with a sparse, faint star field;
-- complex: a dense star field, a Milky-Way band with dust lanes, coloured nebula glow, and sun
-  glare coming in from the image side the sun is on;
+- complex: a dense star field, a Milky-Way band with dust lanes and coloured nebula glow;
 - earth: a lit Earth limb or disc (oceans with sun glint, continents, ice, clouds, atmosphere rim);
 - cluttered: a moderate star field (the clutter itself is 3D props, rendered by the backend);
 - user: an image of the user's own (the sampler picks the file), cover-cropped, sRGB decoded.
-Sunlit things (Earth, glare) follow the camera model of scgen.render.lighting: they scale with the
+The sun's glare is the camera stage's (scgen.render.camera.glare), over the whole image.
+Sunlit things (the Earth) follow the camera model of scgen.render.lighting: they scale with the
 sun irradiance and the exposure. Stars and nebulae only scale with exposure; their brightness is
 exaggerated for visibility (real stars are about 1e-8 of a sunlit plate).
 """
@@ -50,7 +50,6 @@ def background_image(spec: SceneSpec) -> np.ndarray:
         rays = spec.camera.pixel_directions()
         img += gain * _milky_way(rng, rays)
         img += gain * _nebula(rng, cam.height, cam.width)
-        img += _glare(rng, spec)
     elif kind == "earth":
         img = _earth(spec, rng, spec.camera.pixel_directions(), img)
     return img.astype(np.float32)
@@ -95,29 +94,6 @@ def _nebula(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
         density = np.clip(smooth_noise(rng, h, w, octaves=6, base=2) - 0.45, 0, None) ** 1.5
         out += (rng.uniform(0.0, 0.25) * density[..., None] * hue).astype(np.float32)
     return out
-
-
-def _glare(rng: np.random.Generator, spec: SceneSpec) -> np.ndarray:
-    """Veiling glare and a diffraction streak from the sun, entering from the side the sun is on.
-
-    Its strength falls with the sun's angle from the optical axis and follows sun irradiance and
-    exposure, so strong light flares more.
-    """
-    cam = spec.camera
-    h, w = cam.height, cam.width
-    s = np.asarray(spec.sun.direction)
-    side = s[:2] / max(np.linalg.norm(s[:2]), 1e-9)
-    off_axis = np.arccos(np.clip(s[2], -1, 1))
-    cx = 0.5 * (w - 1) * (1 + 1.25 * side[0])
-    cy = 0.5 * (h - 1) * (1 + 1.25 * side[1] * w / h)
-    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-    r = np.hypot(x - cx, y - cy) / max(h, w)
-    bloom = 0.6 * np.exp(-r / 0.12) + 0.15 * np.exp(-r / 0.4)
-    angle = rng.uniform(0, np.pi)
-    dist_line = np.abs((x - cx) * np.sin(angle) - (y - cy) * np.cos(angle)) / max(h, w)
-    streak = 0.2 * np.exp(-dist_line / 0.004) * np.exp(-r / 0.5)
-    strength = spec.sun.irradiance * exposure_scale(spec) * np.exp(-max(off_axis - 0.6, 0.0) / 0.8)
-    return (strength * (bloom + streak)[..., None] * np.array([1.0, 0.95, 0.85])).astype(np.float32)
 
 
 def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np.ndarray) -> np.ndarray:
@@ -187,10 +163,3 @@ def _user_image(spec: SceneSpec, rng: np.random.Generator) -> np.ndarray:
 
 def srgb_to_linear(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
-
-
-def linear_to_srgb8(x: np.ndarray) -> np.ndarray:
-    """Linear radiance -> 8-bit sRGB (clipped: over-exposure saturates, as a real sensor does)."""
-    x = np.clip(x, 0.0, 1.0)
-    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return np.round(s * 255.0).astype(np.uint8)

@@ -11,18 +11,24 @@ from __future__ import annotations
 import shutil
 import tempfile
 import weakref
+from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from scgen.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.model import TargetModel
-from scgen.render.backgrounds import background_image, linear_to_srgb8
+from scgen.render.backgrounds import background_image
 from scgen.render.blender_env import import_bpy, select_device
 from scgen.render.blender_scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender_settings import preset
+from scgen.render.camera import record_image, render_camera
 from scgen.scenes.geometry import project
 from scgen.scenes.spec import SceneSpec
+
+if TYPE_CHECKING:
+    from scgen.render.mitsuba_backend import MitsubaBackend
 
 GRAZING = 1e-4  # |n.s| below this: the surface is edge-on to the sun, its visibility is not measured
 
@@ -46,6 +52,7 @@ class BlenderBackend:
         gpu = self.device != "CPU"
         self.scene = BlenderScene(self._bpy, model, quality_preset, gpu, threads, self._workdir)
         self._hull = np.asarray(model.mesh.convex_hull.vertices, np.float64)
+        self._model, self._threads, self._rays = model, threads, None
 
     @property
     def cycles_s(self) -> float:
@@ -53,11 +60,26 @@ class BlenderBackend:
         return self.scene.cycles_s
 
     def render(self, spec: SceneSpec) -> Buffers:
-        self.scene.update(spec)
+        shown = replace(spec, camera=render_camera(spec.camera))
+        self.scene.update(shown)
         beauty = self.scene.render_beauty()
-        instance, depth = instance_and_depth(beauty)
-        aux = self.scene.render_aux(target_alone=props_may_hide_target(spec, self._hull, instance, depth))
-        return buffers_from_passes(spec, beauty, aux, background_image(spec))
+        if shown.camera is spec.camera:
+            instance, depth = instance_and_depth(beauty)
+            aux = self.scene.render_aux(target_alone=props_may_hide_target(spec, self._hull, instance, depth))
+            buffers = buffers_from_passes(spec, beauty, aux)
+        else:  # a lens Cycles' pinhole image does not sample: labels by exact ray casts along its rays
+            buffers = self._ray_caster().render_geometry(spec)
+        image = composite(beauty, background_image(shown))
+        buffers.rgb, buffers.camera = record_image(spec, image, buffers.instance)
+        return buffers
+
+    def _ray_caster(self) -> MitsubaBackend:
+        """The Mitsuba backend's exact geometric passes, made on first need (cameras with a lens)."""
+        if self._rays is None:
+            from scgen.render.mitsuba_backend import MitsubaBackend
+
+            self._rays = MitsubaBackend(self._model, threads=self._threads)
+        return self._rays
 
     def close(self) -> None:
         """Free every Blender datablock (and Cycles' persistent data) and the EXR folder."""
@@ -96,10 +118,18 @@ def props_may_hide_target(spec: SceneSpec, hull: np.ndarray, instance: np.ndarra
     return bool(((instance[window] > TARGET_ID) & (depth[window] < x[:, 2].max())).any())
 
 
+def composite(beauty: dict[str, np.ndarray], background: np.ndarray) -> np.ndarray:
+    """The linear beauty image over the background (straight alpha from Cycles' film transparency)."""
+    rgba = np.stack([beauty[f"{BEAUTY}.Combined.{c}"] for c in "RGBA"], axis=-1)
+    alpha = np.clip(rgba[..., 3:], 0.0, 1.0)
+    return rgba[..., :3] + (1.0 - alpha) * background
+
+
 def buffers_from_passes(
-    spec: SceneSpec, beauty: dict[str, np.ndarray], aux: dict[str, np.ndarray], background: np.ndarray
+    spec: SceneSpec, beauty: dict[str, np.ndarray], aux: dict[str, np.ndarray]
 ) -> Buffers:
-    """Buffers from the EXR channels of the beauty and aux renders (see blender_scene for the layers)."""
+    """The label passes from the EXR channels of the beauty and aux renders (see blender_scene for the
+    layers); the image is the camera stage's."""
     instance, depth = instance_and_depth(beauty)
     hit = instance != BACKGROUND_ID
     on_target = instance == TARGET_ID
@@ -116,11 +146,8 @@ def buffers_from_passes(
     edge_on = np.abs(normal @ np.asarray(spec.sun.direction, np.float32)) <= GRAZING
     sun_blocked = on_target & (aux[f"{PROBE}.Combined.R"] <= 0.0) & ~edge_on
 
-    rgba = np.stack([beauty[f"{BEAUTY}.Combined.{c}"] for c in "RGBA"], axis=-1)
-    alpha = np.clip(rgba[..., 3:], 0.0, 1.0)
-    rgb = linear_to_srgb8(rgba[..., :3] + (1.0 - alpha) * background)
     return Buffers(
-        rgb=rgb,
+        rgb=np.zeros((*instance.shape, 3), np.uint8),
         depth=depth,
         instance=instance,
         target_depth=target_depth,

@@ -7,13 +7,16 @@ filtered or jittered sample ever blends two surfaces at an edge.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from scgen.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.model import TargetModel
-from scgen.render.backgrounds import background_image, linear_to_srgb8
+from scgen.render.backgrounds import background_image
+from scgen.render.camera import record_image, render_camera
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, check_quality, render_seed
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_llvm import mitsuba_setup
@@ -96,7 +99,7 @@ class MitsubaBackend:
     def render(self, spec: SceneSpec) -> Buffers:
         target, props = self._shapes(spec)
         buffers = self._passes(spec, target, props)
-        buffers.rgb = self._shade(spec, target + props)
+        buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, target + props), buffers.instance)
         return buffers
 
     def render_geometry(self, spec: SceneSpec) -> Buffers:
@@ -148,6 +151,8 @@ class MitsubaBackend:
         return mi.load_dict(d)
 
     def _shade(self, spec: SceneSpec, shapes: list[mi.Mesh]) -> np.ndarray:
+        """The linear composite over the background, on the render camera (scgen.render.camera.lens)."""
+        spec = replace(spec, camera=render_camera(spec.camera))
         cam = spec.camera
         K = cam.K_mat
         d: dict = {
@@ -190,8 +195,7 @@ class MitsubaBackend:
         scene = mi.load_dict(d)
         img = np.asarray(mi.render(scene, seed=render_seed(spec)), dtype=np.float32)
         fg, alpha = img[..., :3], img[..., 3:4]
-        composite = fg + (1.0 - np.clip(alpha, 0, 1)) * background_image(spec)
-        return linear_to_srgb8(composite)
+        return fg + (1.0 - np.clip(alpha, 0, 1)) * background_image(spec)
 
 
 def cast_rays(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -17,6 +17,8 @@ import yaml
 
 from scgen.errors import ScgenError
 from scgen.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
+from scgen.scenes.camera_config import DEFAULT_CAMERA, camera_preset, check_camera, scale_pixel_sizes
+from scgen.scenes.checks import check_prob, check_range, is_number
 from scgen.scenes.finish import FINISH_MODES
 from scgen.scenes.spec import CameraSpec
 from scgen.sky_data import BLUE_MARBLE, HIPPARCOS, resolve_source
@@ -26,15 +28,7 @@ USER_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 # Every key is documented in docs/config.md.
 DEFAULT_CONFIG: dict[str, Any] = {
-    "camera": {
-        "width": 640,
-        "height": 480,
-        "fx": 600.0,
-        "fy": 600.0,
-        "cx": None,  # None: (width - 1) / 2, the image centre under the pixel-centre convention
-        "cy": None,
-        "exposure_ev": 0.0,
-    },
+    "camera": DEFAULT_CAMERA,  # scgen.scenes.camera_config: intrinsics, lens, exposure, optics, sensor
     "distance": {
         # projected diameter range (px) that sets the default distance range; range_m overrides it
         "min_px": 60.0,
@@ -112,7 +106,7 @@ def _merge(base: dict[str, Any], override: dict[str, Any], prefix: str = "") -> 
             if (
                 not isinstance(value, dict)
                 or set(value) - set(base[key])
-                or not all(map(_is_number, value.values()))
+                or not all(map(is_number, value.values()))
             ):
                 raise ScgenError(
                     f"config key '{name}' must map {sorted(base[key])} to numbers, got {value!r}"
@@ -121,10 +115,6 @@ def _merge(base: dict[str, Any], override: dict[str, Any], prefix: str = "") -> 
         else:
             _check_type(name, base[key], value)
             base[key] = value
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _check_type(name: str, default: Any, value: Any) -> None:
@@ -154,16 +144,37 @@ def load_config(
     path: str | Path | None = None,
     overrides: dict[str, Any] | None = None,
     resolution: tuple[int, int] | None = None,
+    camera: str | None = None,
 ) -> dict[str, Any]:
-    """Defaults, then the file at `path` (TOML/YAML/JSON), `overrides`, `resolution`; validated, resolved."""
+    """Defaults, the camera preset, then the file at `path` (TOML/YAML/JSON), `overrides`, `resolution`;
+    validated, resolved. The preset is `camera`, else the file's camera.preset, else 'default'."""
     cfg = copy.deepcopy(DEFAULT_CONFIG)
-    if path is not None:
-        _merge(cfg, read_config_file(Path(path)))
-    if overrides:
-        _merge(cfg, overrides)
+    data = read_config_file(Path(path)) if path is not None else {}
+    preset = camera or _preset_of(data) or _preset_of(overrides or {})
+    if preset is not None:
+        apply_camera_preset(cfg, preset)
+    for layer in (data, overrides or {}):
+        layer = copy.deepcopy(layer)
+        if isinstance(layer.get("camera"), dict):
+            layer["camera"].pop("preset", None)
+        _merge(cfg, layer)
     if resolution is not None:
         apply_resolution(cfg, *resolution)
     return resolve(cfg)
+
+
+def _preset_of(layer: dict[str, Any]) -> str | None:
+    table = layer.get("camera")
+    return table.get("preset") if isinstance(table, dict) else None
+
+
+def apply_camera_preset(cfg: dict[str, Any], name: str) -> None:
+    """The preset's camera table; the distance range in pixels follows its image width (same framing)."""
+    table = camera_preset(name)
+    s = table["width"] / cfg["camera"]["width"]
+    cfg["camera"] = table
+    cfg["distance"]["min_px"] *= s
+    cfg["distance"]["max_px"] *= s
 
 
 def apply_resolution(cfg: dict[str, Any], width: int, height: int) -> None:
@@ -177,6 +188,7 @@ def apply_resolution(cfg: dict[str, Any], width: int, height: int) -> None:
         if cam[key] is not None:
             cam[key] = (cam[key] + 0.5) * s - 0.5
     cam["width"], cam["height"] = width, height
+    scale_pixel_sizes(cam, s)
     cfg["distance"]["min_px"] *= s
     cfg["distance"]["max_px"] *= s
 
@@ -207,42 +219,41 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
             raise ScgenError(f"camera.{key} must be a positive integer, got {cam[key]!r}")
     if cam["fx"] <= 0 or cam["fy"] <= 0:
         raise ScgenError(f"camera focal lengths must be positive, got fx={cam['fx']} fy={cam['fy']}")
-    if cam["fx"] != cam["fy"]:  # neither renderer models non-square pixels exactly (Blender 5.0 EXR, Mitsuba)
-        raise ScgenError(f"camera.fx and camera.fy must be equal (square pixels): {cam['fx']} vs {cam['fy']}")
     for key, size in (("cx", "width"), ("cy", "height")):
-        if cam[key] is not None and not _is_number(cam[key]):
+        if cam[key] is not None and not is_number(cam[key]):
             raise ScgenError(f"camera.{key} must be a number, got {cam[key]!r}")
         cam[key] = (cam[size] - 1) / 2 if cam[key] is None else float(cam[key])
+    check_camera(cam)
 
     dist = cfg["distance"]
     if dist["range_m"] is None:
-        _check_range("distance.min_px/max_px", [dist["min_px"], dist["max_px"]], low=1.0)
+        check_range("distance.min_px/max_px", [dist["min_px"], dist["max_px"]], low=1.0)
     else:
-        _check_range("distance.range_m", dist["range_m"], low=1e-6)
+        check_range("distance.range_m", dist["range_m"], low=1e-6)
 
     occ = cfg["occluders"]
     for name in ("depth_frac", "size_rel"):
-        _check_range(f"occluders.{name}", occ[name], low=1e-6)
+        check_range(f"occluders.{name}", occ[name], low=1e-6)
     if not occ["depth_frac"][1] <= 1.0:
         raise ScgenError("occluders.depth_frac must lie in (0, 1] (occluders sit in front of the target)")
     if set(occ["target_r_occ"]) != set(OCCLUSION_GROUPS[1:]):
         raise ScgenError(f"occluders.target_r_occ must give a range for each of {list(OCCLUSION_GROUPS[1:])}")
     for group, (lo, hi) in zip(OCCLUSION_GROUPS[1:], ((0.0, 0.2), (0.2, 0.4), (0.4, 1.0)), strict=True):
         r = occ["target_r_occ"][group]
-        _check_range(f"occluders.target_r_occ.{group}", r, low=0.0)
+        check_range(f"occluders.target_r_occ.{group}", r, low=0.0)
         if not (lo < r[0] and r[1] <= hi):
             raise ScgenError(f"occluders.target_r_occ.{group} must lie in ({lo}, {hi}], got {r}")
     shadow = cfg["shadow"]
     for name in ("distance_diam", "size_diam", "coverage"):
-        _check_range(f"shadow.{name}", shadow[name], low=0.0)
+        check_range(f"shadow.{name}", shadow[name], low=0.0)
     if not (shadow["coverage"][0] > 0.0 and shadow["coverage"][1] <= 1.0):
         raise ScgenError(f"shadow.coverage must lie in (0, 1], got {shadow['coverage']}")
     if shadow["offset_diam"] is not None:
-        _check_range("shadow.offset_diam", shadow["offset_diam"], low=0.0)
+        check_range("shadow.offset_diam", shadow["offset_diam"], low=0.0)
     if not shadow["size_diam"][0] > 0:
         raise ScgenError("shadow.size_diam must be positive")
-    _check_prob("shadow.caster_prob", shadow["caster_prob"])
-    _check_prob("occluders.distractor_prob", occ["distractor_prob"])
+    check_prob("shadow.caster_prob", shadow["caster_prob"])
+    check_prob("occluders.distractor_prob", occ["distractor_prob"])
     _resolve_background(cfg["background"])
     _check_finish(cfg["finish"])
     if not 0 <= cfg["illumination"]["max_phase_deg"] <= 180:
@@ -258,15 +269,15 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
 
 def _resolve_background(bg: dict[str, Any]) -> None:
     """Check the background section; list the user's images; drop the user share when there are none."""
-    _check_range("background.clutter_count", bg["clutter_count"], low=0)
-    _check_range("background.clutter_depth_factor", bg["clutter_depth_factor"], low=1.0)
-    _check_range("background.clutter_size_rel", bg["clutter_size_rel"], low=1e-6)
-    _check_range("background.earth_limb_radius_deg", bg["earth_limb_radius_deg"], low=1.0)
-    _check_range("background.earth_disc_radius_deg", bg["earth_disc_radius_deg"], low=0.1)
+    check_range("background.clutter_count", bg["clutter_count"], low=0)
+    check_range("background.clutter_depth_factor", bg["clutter_depth_factor"], low=1.0)
+    check_range("background.clutter_size_rel", bg["clutter_size_rel"], low=1e-6)
+    check_range("background.earth_limb_radius_deg", bg["earth_limb_radius_deg"], low=1.0)
+    check_range("background.earth_disc_radius_deg", bg["earth_disc_radius_deg"], low=0.1)
     if bg["earth_limb_radius_deg"][1] >= 90 or bg["earth_disc_radius_deg"][1] >= 90:
         raise ScgenError("background earth radii must stay below 90 degrees")
-    _check_prob("background.earth_limb_prob", bg["earth_limb_prob"])
-    _check_prob("background.earth_albedo", bg["earth_albedo"])
+    check_prob("background.earth_limb_prob", bg["earth_limb_prob"])
+    check_prob("background.earth_albedo", bg["earth_albedo"])
     for key, real, package in (("earth_map", "bluemarble", BLUE_MARBLE), ("stars", "hipparcos", HIPPARCOS)):
         if bg[key] not in (real, "procedural"):
             raise ScgenError(f"background.{key} must be {real} or procedural, got {bg[key]!r}")
@@ -293,26 +304,11 @@ def _resolve_background(bg: dict[str, Any]) -> None:
         bg["probs"] = {k: (0.0 if k == USER_BACKGROUND else p / rest) for k, p in bg["probs"].items()}
 
 
-def _check_range(name: str, value: Any, low: float) -> None:
-    ok = (
-        isinstance(value, (list, tuple))
-        and len(value) == 2
-        and all(isinstance(v, (int, float)) for v in value)
-    )
-    if not ok or not (low <= value[0] <= value[1]):
-        raise ScgenError(f"{name} must be [min, max] with {low} <= min <= max, got {value!r}")
-
-
-def _check_prob(name: str, p: Any) -> None:
-    if not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
-        raise ScgenError(f"{name} must be a probability in [0, 1], got {p!r}")
-
-
 def _check_finish(finish: dict[str, Any]) -> None:
     if finish["mode"] not in FINISH_MODES:
         raise ScgenError(f"finish.mode must be one of {', '.join(FINISH_MODES)}, got {finish['mode']!r}")
-    _check_prob("finish.swap_prob", finish["swap_prob"])
-    _check_prob("finish.jitter", finish["jitter"])
+    check_prob("finish.swap_prob", finish["swap_prob"])
+    check_prob("finish.jitter", finish["jitter"])
 
 
 def _check_distribution(name: str, probs: dict[str, float]) -> None:

@@ -11,7 +11,8 @@ import zlib
 import numpy as np
 
 FACTORS = (
-    "pose", "distance", "position", "illumination", "shadow", "background", "occluders", "sky", "finish",
+    "pose", "distance", "position", "illumination", "shadow", "background", "occluders", "camera",
+    "sky", "finish",
 )  # fmt: skip
 
 

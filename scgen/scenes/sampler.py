@@ -16,6 +16,7 @@ from scgen.scenes.geometry import (
     random_rotation,
     unit_sphere_hits,
 )
+from scgen.scenes.imaging import sample_imaging
 from scgen.scenes.placement import Blank, place_caster, place_occluder
 from scgen.scenes.rng import factor_rng
 from scgen.scenes.silhouette import CameraView, TargetShape, camera_view, sun_view
@@ -86,6 +87,7 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
         props=tuple(occluders + caster + clutter),
         requested_occlusion=occ_group,
         shadow_caster=bool(caster),
+        imaging=sample_imaging(factor_rng(seed, index, "camera"), cfg["camera"]),
         finish=sample_finish(factor_rng(seed, index, "finish"), cfg["finish"]),
     )
 

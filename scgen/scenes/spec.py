@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from scgen.scenes.geometry import focal_length
+from scgen.scenes.geometry import focal_length, project
+from scgen.scenes.lens import distort, is_pinhole, undistort
 
 
 @dataclass(frozen=True)
@@ -44,12 +45,18 @@ class Pose:
 
 @dataclass(frozen=True)
 class CameraSpec:
-    """Pinhole camera: K in pixels (row-major), image size, and the exposure in EV (logged, never silent)."""
+    """Camera: K in pixels (row-major), image size, the base exposure in EV, and OpenCV's lens distortion
+    (k1, k2, p1, p2, k3; empty or zero: pinhole). Rays and projections go through the lens exactly."""
 
     width: int
     height: int
     K: tuple[float, ...]
     exposure_ev: float
+    dist: tuple[float, ...] = ()
+
+    @property
+    def pinhole(self) -> bool:
+        return is_pinhole(self.dist)
 
     @property
     def K_mat(self) -> np.ndarray:
@@ -60,7 +67,9 @@ class CameraSpec:
         """From the config's camera section (resolved: cx, cy filled in)."""
         c = camera
         K = (c["fx"], 0.0, c["cx"], 0.0, c["fy"], c["cy"], 0.0, 0.0, 1.0)
-        return CameraSpec(c["width"], c["height"], tuple(float(k) for k in K), float(c["exposure_ev"]))
+        dist = tuple(float(k) for k in c.get("dist") or ())
+        return CameraSpec(c["width"], c["height"], tuple(float(k) for k in K), float(c["exposure_ev"]),
+                          () if is_pinhole(dist) else dist)  # fmt: skip
 
     @property
     def focal(self) -> float:
@@ -68,8 +77,19 @@ class CameraSpec:
         return focal_length(self.K_mat)
 
     def rays(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Camera-frame rays K^-1 [u, v, 1] (z = 1) through pixel positions (..., 3); centres at integers."""
-        return np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(self.K_mat).T
+        """Camera-frame rays (z = 1) through pixel positions (..., 3), centres at integers: K^-1 [u, v, 1],
+        undistorted through the lens when it has distortion."""
+        rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(self.K_mat).T
+        if not self.pinhole:
+            rays[..., :2] = undistort(rays[..., :2], self.dist)
+        return rays
+
+    def project(self, X: np.ndarray) -> np.ndarray:
+        """Pixel coordinates (N x 2) of camera-frame points X (N x 3, z > 0), through the lens."""
+        if self.pinhole:
+            return project(self.K_mat, X)
+        xy = distort(X[:, :2] / X[:, 2:3], self.dist)
+        return project(self.K_mat, np.concatenate([xy, np.ones((len(xy), 1))], axis=1))
 
     def pixel_rays(self) -> np.ndarray:
         """Rays (z = 1) through every pixel centre, H x W x 3, float64."""
@@ -117,6 +137,28 @@ class BackgroundSpec:
 
 
 @dataclass(frozen=True)
+class ImagingSpec:
+    """The camera stage's per-image draws (scgen.scenes.imaging) and the camera table they came from.
+
+    ev_shift: EV added to the base exposure (0 in fixed and auto mode: auto decides it from the image);
+    gain: analog gain (the noise level); psf_fwhm_px; motion blur length (px) and direction (deg);
+    vignetting (light lost at the farthest corner); chromatic_px; jpeg_quality; noise_seed seeds the
+    pixel noise and the flare's ghosts. `camera` is the resolved camera table (sensor, optics, ...).
+    """
+
+    ev_shift: float
+    gain: float
+    psf_fwhm_px: float
+    motion_blur_px: float
+    motion_blur_deg: float
+    vignetting: float
+    chromatic_px: float
+    jpeg_quality: int
+    noise_seed: int
+    camera: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class SceneSpec:
     """Everything a backend needs to render sample `index` of `seed`, and every sampled factor's label."""
 
@@ -130,6 +172,7 @@ class SceneSpec:
     props: tuple[PropSpec, ...]
     requested_occlusion: str
     shadow_caster: bool
+    imaging: ImagingSpec | None = None  # None: the ideal camera (no stage draws)
     finish: dict[str, dict[str, Any]] = field(default_factory=dict)  # scgen.scenes.finish; {}: nominal
 
     @property
@@ -149,7 +192,8 @@ class SceneSpec:
             seed=int(d["seed"]),
             index=int(d["index"]),
             camera=CameraSpec(
-                int(cam["width"]), int(cam["height"]), tuple(cam["K"]), float(cam["exposure_ev"])
+                int(cam["width"]), int(cam["height"]), tuple(cam["K"]), float(cam["exposure_ev"]),
+                tuple(cam.get("dist", ())),
             ),
             target=pose(d["target"]),
             distance_m=float(d["distance_m"]),
@@ -165,5 +209,6 @@ class SceneSpec:
             ),
             requested_occlusion=d["requested_occlusion"],
             shadow_caster=bool(d["shadow_caster"]),
+            imaging=ImagingSpec(**d["imaging"]) if d.get("imaging") else None,
             finish=d.get("finish", {}),
         )
