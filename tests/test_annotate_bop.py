@@ -90,7 +90,8 @@ def test_xyz_maps_reproject_onto_their_pixels_and_lie_on_the_mesh(annotated: Pat
             vs, us = np.nonzero(visib)
             C = crop[vs, us].astype(np.float64)
             R, t = bop.gt_pose(entry)
-            assert (reprojection_error(C, us + x, vs + y, K, R, t) <= 0.5).mean() >= 0.995
+            camera = bop.camera_spec({"cam_K": np.ravel(K).tolist()}, *visib.shape[::-1])
+            assert (reprojection_error(C, us + x, vs + y, camera, R, t) <= 0.5).mean() >= 0.995
             _, dist, _ = trimesh.proximity.closest_point(meshes[entry["obj_id"]], C)
             assert dist.max() <= 0.005 * diameters[entry["obj_id"]]
             n += len(C)

@@ -43,7 +43,7 @@ def test_xyz_reprojects_and_lies_on_surface(make_model):
         if len(us) < 20:
             continue
         C = ann.xyz[vs, us].astype(np.float64)
-        err = reprojection_error(C, us, vs, spec.camera.K_mat, spec.target.R_mat, spec.target.t_vec)
+        err = reprojection_error(C, us, vs, spec.camera, spec.target.R_mat, spec.target.t_vec)
         assert (err <= 0.5).mean() >= 0.995
         _, dist, _ = surface.on_surface(C)
         assert (dist <= 0.005 * model.diameter).mean() >= 0.99, f"max {dist.max():.5f} m"

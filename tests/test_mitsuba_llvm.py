@@ -45,8 +45,10 @@ def render_args(out: Path) -> list[str]:
 
 
 def labels(root: Path) -> dict[str, bytes]:
-    """Every label file of a dataset (masks, xyz maps, BOP JSON), by relative path; RGB left out."""
-    files = [p for p in root.rglob("*") if p.is_file() and "/rgb/" not in str(p) and p.suffix != ".csv"]
+    """Every label file of a dataset (masks, xyz maps, BOP JSON), by relative path; the images, and the
+    records and metadata.csv that also describe them (e.g. their saturated share), left out."""
+    files = [p for p in root.rglob("*") if p.is_file() and p.parent.name not in ("rgb", "records")
+             and p.suffix != ".csv"]  # fmt: skip
     return {str(p.relative_to(root)): p.read_bytes() for p in files if p.parent != root}
 
 

@@ -1,0 +1,204 @@
+"""The camera stage's physics: photon transfer, PSF width, blooming's charge, exposure, flare, lens.
+
+Sensor and optics are checked on images whose truth is known (flat fields, a point source, a column of
+charge); the lens on a ramp image that encodes where each render-camera pixel looks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from scgen.buffers import TARGET_ID
+from scgen.errors import ScgenError
+from scgen.render.camera import glare, optics
+from scgen.render.camera.exposure import exposure_shift_ev, luminance
+from scgen.render.camera.lens import render_camera, to_camera
+from scgen.render.camera.sensor import bloom_columns, conversion_gain, expose, shot_noise
+from scgen.scenes import load_config
+from scgen.scenes.camera_config import camera_preset
+from scgen.scenes.lens import distort, undistort
+from scgen.scenes.spec import CameraSpec, SunSpec
+
+SPEEDPLUS = camera_preset("speedplus")
+
+
+def test_photon_transfer_recovers_conversion_gain_and_read_noise():
+    """Variance against mean over flat fields (two frames per level, so the fixed pattern cancels):
+    var = K * mean + K^2 * sigma^2, with K the ADC codes per electron and sigma the read noise. The
+    levels start where the noise floor is a third of the variance (and nothing clips at zero); the
+    line is fitted with relative weights, as photon-transfer curves are."""
+    sensor = dict(camera_preset("default")["sensor"], adc_bits=16, dark_current_e_s=0.0, hot_pixel_frac=0.0,
+                  dead_pixel_frac=0.0)  # fmt: skip
+    gain = 4.0
+    top = 2**16 - 1
+    means, variances = [], []
+    for k, level in enumerate(np.geomspace(0.005, 0.5, 10)):
+        flat = np.full((128, 128, 1), level, np.float32)
+        a = expose(flat, sensor, gain, True, 3, np.random.default_rng([k, 1])) * top
+        b = expose(flat, sensor, gain, True, 3, np.random.default_rng([k, 2])) * top
+        means.append(0.5 * (a.mean() + b.mean()))
+        variances.append(np.var(a - b) / 2)
+    slope, intercept = np.polyfit(means, variances, 1, w=1 / np.asarray(variances))
+    expected_k = conversion_gain(sensor, gain)
+    assert slope == pytest.approx(expected_k, rel=0.10)
+    read_noise = np.sqrt(max(intercept - 1 / 12, 0.0)) / slope  # less the quantisation's 1/12 code^2
+    assert read_noise == pytest.approx(sensor["read_noise_e"], rel=0.10)
+
+
+@pytest.mark.parametrize("lam", [0.3, 3.0, 25.0])
+def test_few_electrons_are_poisson(lam: float):
+    counts = shot_noise(np.full(200_000, lam, np.float32), np.random.default_rng(1))
+    assert np.array_equal(counts, np.round(counts))  # whole electrons
+    assert counts.mean() == pytest.approx(lam, rel=0.02)
+    assert counts.var() == pytest.approx(lam, rel=0.03)
+    assert (counts == 0).mean() == pytest.approx(np.exp(-lam), abs=0.003)
+
+
+@pytest.mark.parametrize("fwhm", [1.5, 2.5, 4.0])
+def test_gaussian_psf_of_a_point_source_has_the_configured_fwhm(fwhm: float):
+    point = np.zeros((41, 41, 1), np.float32)
+    point[20, 20] = 1.0
+    img = optics.psf_blur(point, "gaussian", fwhm)[..., 0]
+    assert img.sum() == pytest.approx(1.0, rel=1e-4)
+    y, x = np.mgrid[0:41, 0:41] - 20
+    sigma = np.sqrt((img * x**2).sum() / img.sum())
+    assert 2.3548 * sigma == pytest.approx(fwhm, rel=0.10)
+
+
+@pytest.mark.parametrize("diameter", [3.0, 5.0, 8.0])
+def test_defocus_disc_of_a_point_source_has_the_configured_width(diameter: float):
+    """A uniform disc of area A peaks at 1/A (its inner pixels are wholly covered): the diameter of the
+    disc of that area is the configured one."""
+    point = np.zeros((41, 41, 1), np.float32)
+    point[20, 20] = 1.0
+    img = optics.psf_blur(point, "defocus", diameter)[..., 0]
+    assert img.sum() == pytest.approx(1.0, rel=1e-4)
+    assert 2 * np.sqrt(1 / (np.pi * img.max())) == pytest.approx(diameter, rel=0.10)
+
+
+def test_motion_blur_is_a_line_of_the_drawn_length_and_direction():
+    point = np.zeros((41, 41, 1), np.float32)
+    point[20, 20] = 1.0
+    img = optics.motion_blur(point, 10.0, 0.0)[..., 0]
+    assert img.sum() == pytest.approx(1.0, rel=1e-4)
+    assert np.abs(img[:19]).sum() + np.abs(img[22:]).sum() < 1e-6  # horizontal: no light off the row
+    xs = np.nonzero(img.sum(axis=0) > 1e-4)[0]
+    assert xs.max() - xs.min() + 1 == pytest.approx(11, abs=1)
+
+
+def test_blooming_spills_along_columns_and_conserves_charge():
+    full_well = 1000.0
+    e = np.full((300, 40, 1), 100.0, np.float32)
+    e[140:143, 18:21] = 40 * full_well  # 3 x 3 pixels with 39 wells of excess each
+    out = bloom_columns(e, full_well)
+    assert out.max() <= full_well + 1e-3
+    assert out.sum() == pytest.approx(e.sum(), rel=0.05)
+    assert np.array_equal(out[:, :18], e[:, :18]) and np.array_equal(out[:, 21:], e[:, 21:])  # columns only
+    filled = (out[:, 18:21, 0] >= full_well - 1e-3).sum(axis=0)
+    assert (filled >= 3 * 39).all()  # each column's excess filled ~39 wells' worth of pixels
+
+
+def test_auto_exposure_brings_the_visible_target_to_its_target_value():
+    exposure = dict(camera_preset("default")["exposure"], mode="auto")
+    img = np.full((20, 20, 3), 0.01, np.float32)
+    img[5:15, 5:15] = [0.6, 0.7, 0.8]
+    visible = np.zeros((20, 20), bool)
+    visible[5:15, 5:15] = True
+    ev = exposure_shift_ev(exposure, 0.0, img, visible)
+    shown = img * 2.0 ** (-ev)
+    assert luminance(shown)[visible].mean() == pytest.approx(exposure["auto_target"], rel=1e-5)
+
+
+def test_lens_round_trip_is_exact():
+    xy = np.random.default_rng(0).uniform(-0.35, 0.35, (1000, 2))
+    back = undistort(distort(xy, tuple(SPEEDPLUS["dist"])), tuple(SPEEDPLUS["dist"]))
+    assert np.abs(back - xy).max() < 1e-12
+
+
+def test_speedplus_distortion_moves_edge_pixels_as_published():
+    """SPEED+'s lens moves the middle of the right edge by ~17 px and the corner by ~25 px."""
+    cfg = load_config(camera="speedplus")
+    cam = CameraSpec.from_config(cfg["camera"])
+    pinhole = replace(cam, dist=())
+    for (u, v), shift in (((1919.0, 600.0), 17.0), ((1919.0, 1199.0), 25.0)):
+        ideal = pinhole.rays(np.array([u]), np.array([v]))
+        moved = cam.project(ideal)[0]
+        assert np.hypot(moved[0] - u, moved[1] - v) == pytest.approx(shift, abs=1.5)
+
+
+def test_render_camera_resampling_lands_each_pixel_on_its_ray():
+    """A ramp image on the render camera holds, at each pixel, that pixel's own coordinates; resampled
+    through the lens, pixel p must hold the render-camera projection of p's ray (bilinear is exact on a
+    ramp, up to cv2.remap's 1/32 px interpolation grid)."""
+    cfg = load_config(camera="speedplus", resolution=(240, 150))
+    cam = CameraSpec.from_config(cfg["camera"])
+    shown = render_camera(cam)
+    assert shown.K_mat[0, 0] == shown.K_mat[1, 1] and shown.pinhole
+    v, u = np.mgrid[0 : shown.height, 0 : shown.width].astype(np.float32)
+    ramp = np.stack([u, v, np.zeros_like(u)], axis=-1)
+    got = to_camera(ramp, cam)[..., :2]
+    rays = cam.pixel_rays()
+    want = np.stack([rays[..., 0], rays[..., 1]], -1) * shown.K_mat[0, 0] + shown.K_mat[:2, 2]
+    assert np.abs(got - want).max() < 1 / 32 + 1e-3
+
+
+def _spec_with_sun(direction: tuple[float, float, float]):
+    from scgen.generator import Generator
+
+    gen = Generator.load(seed=1, resolution=(160, 120), backend="mitsuba")
+    spec = gen.scene(0)
+    return replace(spec, sun=SunSpec(direction, "normal", 1361.0))
+
+
+def test_sun_in_view_flares_over_the_image_unless_the_target_hides_it():
+    s = np.array([0.05, -0.03, 1.0])
+    spec = _spec_with_sun(tuple(s / np.linalg.norm(s)))
+    img = np.zeros((120, 160, 3), np.float32)
+    rng = np.random.default_rng(0)
+    clear = np.zeros((120, 160), np.int32)
+    flared, present = glare.sun_flare(img, spec, clear, 0.0, spec.imaging.camera["glare"], rng)
+    assert present and flared.min() > 0  # veiling glare over every pixel
+    assert flared.max() > 1e3  # the sun's disc itself
+    hidden = np.full((120, 160), TARGET_ID, np.int32)
+    dark, present = glare.sun_flare(img, spec, hidden, 0.0, spec.imaging.camera["glare"], rng)
+    assert not present and dark.max() == 0.0
+
+
+def test_sun_behind_the_camera_never_flares():
+    spec = _spec_with_sun((0.0, 0.0, -1.0))
+    img = np.zeros((120, 160, 3), np.float32)
+    out, present = glare.sun_flare(img, spec, np.zeros((120, 160), np.int32), 0.0,
+                                   spec.imaging.camera["glare"], np.random.default_rng(0))  # fmt: skip
+    assert not present and out is img
+
+
+def test_bloom_spreads_only_light_above_saturation():
+    img = np.full((64, 64, 1), 0.5, np.float32)
+    assert glare.bloom(img, 0.1, 40.0, 6) is img
+    img[32, 32] = 5000.0
+    out = glare.bloom(img, 0.1, 40.0, 6)
+    assert out[32, 40, 0] > 0.5 and out[0, 0, 0] >= 0.5
+    halo = (out - img).sum()
+    assert halo == pytest.approx(0.1 * (5000.0 - 1.0), rel=0.1)  # the share of the excess, spread
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ({"camera": {"output": {"bits": 12}}}, "camera.output.bits"),
+        ({"camera": {"optics": {"psf_fwhm_px": [2.0, 1.0]}}}, "camera.optics.psf_fwhm_px"),
+        ({"camera": {"dist": [0.1, 0.2]}}, "camera.dist"),
+        ({"camera": {"exposure": {"mode": "manual"}}}, "camera.exposure.mode"),
+    ],
+)
+def test_bad_camera_values_are_named(override: dict, message: str):
+    with pytest.raises(ScgenError, match=message):
+        load_config(overrides=override)
+
+
+def test_unknown_preset_is_named():
+    with pytest.raises(ScgenError, match="unknown camera preset 'gopro'"):
+        load_config(camera="gopro")
