@@ -22,7 +22,7 @@ from posenet.errors import PosenetError
 from posenet.evaluate import (
     BATCH_SIZE,
     bop_results_csv,
-    evaluate,
+    evaluate_pnp,
     format_table,
     json_record,
     load_model,
@@ -31,6 +31,7 @@ from posenet.evaluate import (
 from posenet.evaluate import by_factor as run_by_factor
 from posenet.export import OPSET, export_onnx, max_difference, onnx_session
 from posenet.models import VARIANTS
+from posenet.ransac import PNP_LABELS, PNP_METHODS
 from posenet.train import train as run_train
 from posenet.train_detector import train_detector
 from posenet.viz import heatmap_panel, overlay_panel
@@ -158,6 +159,13 @@ def train(
     help="Object to evaluate  [default: the one the checkpoint was trained on]",
 )
 @click.option("--bop-csv", type=PATH, default=None, help="Also write the estimates as a BOP19 results CSV.")
+@click.option(
+    "--pnp",
+    type=click.Choice(["patch", "ransac", "both"]),
+    default="patch",
+    show_default=True,
+    help="Pose solver: the network's Patch-PnP, OpenCV's PnP-RANSAC on its predicted xyz and mask, or both.",
+)
 @one_line_errors(PosenetError, ScgenError)
 def eval_cmd(
     data: Path,
@@ -171,17 +179,22 @@ def eval_cmd(
     batch_size: int,
     obj_id: int | None,
     bop_csv: Path | None,
+    pnp: str,
 ) -> None:
     """Rotation/translation error, ADD@0.02 m, ADD@0.1d (and what the rotation and the translation each
     score alone), ADD-S@0.1d, MSSD, ESA score and batch-1 latency.
 
     For an object with symmetries (models_info), ADD is ADD-S and the rotation error is also given as
-    the smallest over the symmetric poses of the ground truth.
+    the smallest over the symmetric poses of the ground truth. With --pnp both, each figure is given for
+    Patch-PnP and PnP-RANSAC side by side.
     """
+    methods = PNP_METHODS if pnp == "both" else (pnp,)
+    if bop_csv is not None and len(methods) > 1:
+        raise PosenetError("--bop-csv writes the estimates of one PnP method: --pnp patch or --pnp ransac")
     if by_factor is not None:
         if bop_csv is not None:
             raise PosenetError("--bop-csv writes the estimates of one checkpoint, not a --by-factor table")
-        res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers, batch_size, obj_id)
+        res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers, batch_size, obj_id, methods)
         click.echo(f"boxes: {res['boxes']}")
         click.echo(_by_factor_table(res))
         if json_path is not None:
@@ -189,24 +202,30 @@ def eval_cmd(
         return
     if len(ckpt) != 1:
         raise PosenetError("several --ckpt are only compared with --by-factor")
-    result = evaluate(data, ckpt[0], split, boxes, workers=workers, batch_size=batch_size, obj_id=obj_id)
-    s = result.summary
-    click.echo(f"boxes: {s['boxes']}")
-    click.echo(format_table([f"{result.variant} on {split}", "value"], summary_rows([s])))
+    results = evaluate_pnp(
+        data, ckpt[0], methods, split, boxes, workers=workers, batch_size=batch_size, obj_id=obj_id
+    )
+    variant, summaries = results[methods[0]].variant, [r.summary for r in results.values()]
+    click.echo(f"boxes: {summaries[0]['boxes']}")
+    columns = ["value"] if methods == ("patch",) else [PNP_LABELS[m] for m in methods]
+    rows = summary_rows(summaries, keys=set().union(*summaries))
+    click.echo(format_table([f"{variant} on {split}", *columns], rows))
     if predictions is None:
         predictions = (
             json_path.with_suffix(".predictions.jsonl")
             if json_path
             else ckpt[0].with_name(f"predictions_{split}.jsonl")
         )
-    atomic_write_text(predictions, "".join(json.dumps(json_record(r)) + "\n" for r in result.records))
+    records = [{**json_record(r), "pnp": m} for m, res in results.items() for r in res.records]
+    atomic_write_text(predictions, "".join(json.dumps(r) + "\n" for r in records))
     if json_path is not None:
+        body = summaries[0] if len(methods) == 1 else {m: r.summary for m, r in results.items()}
         atomic_write_text(
-            json_path, json.dumps({"variant": result.variant, "split": split, **s}, indent=2) + "\n"
+            json_path, json.dumps({"variant": variant, "split": split, **body}, indent=2) + "\n"
         )
     click.echo(f"predictions: {predictions}")
     if bop_csv is not None:
-        atomic_write_text(bop_csv, bop_results_csv(result.records))
+        atomic_write_text(bop_csv, bop_results_csv(results[methods[0]].records))
         click.echo(f"BOP results: {bop_csv}")
 
 

@@ -31,6 +31,7 @@ from posenet.errors import PosenetError
 from posenet.geometry import decode_pose
 from posenet.metrics import TURNED_DEG, headline_add, sample_errors, summarise
 from posenet.models import PoseNet, create_model
+from posenet.ransac import PNP_LABELS, ransac_poses
 from scgen import bop
 
 BATCH_SIZE = 32
@@ -43,6 +44,7 @@ LATENCY_ITERS = 20  # timed ones; the latency is their median
 SUMMARY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("instances", "n", "d"),
     ("missed (no detection: failures; errors are over the rest)", "missed", "d"),
+    ("PnP failed (too few mask pixels or no RANSAC pose: failures)", "pnp_failed", "d"),
     ("rotation error, mean (deg)", "re_deg", ".2f"),
     ("rotation error, median (deg)", "re_deg_median", ".2f"),
     (f"turned poses, rotation error > {TURNED_DEG:.0f} deg (%)", "turned", "%"),
@@ -88,37 +90,64 @@ def load_model(ckpt: Path, device: torch.device) -> tuple[PoseNet, dict[str, Any
     return model.to(device).eval(), state
 
 
+Predictions = tuple[list[dict[str, Any]], dict[str, list[float]]]  # records, and each error's list
+
+
 @torch.inference_mode()
 def predict(
-    model: PoseNet, loader: DataLoader, obj: ObjectModel, device: torch.device
-) -> tuple[list[dict[str, Any]], dict[str, list[float]]]:
-    """Records in loader order (scene_id, im_id, obj_id, R row-major, t in metres, time_s, each error of
-    metrics.sample_errors) and each error's list over them, for metrics.summarise.
+    model: PoseNet,
+    loader: DataLoader,
+    obj: ObjectModel,
+    device: torch.device,
+    methods: Sequence[str] = ("patch",),
+    mask_type: str = "bce",
+) -> dict[str, Predictions]:
+    """Per PnP method (`patch`: the network's own pose; `ransac`: posenet.ransac on its correspondences,
+    reading its mask channel as `mask_type` trained it), records in loader order (scene_id, im_id, obj_id,
+    R row-major, t in metres, time_s, each error of metrics.sample_errors) and each error's list over
+    them, for metrics.summarise. A RoI PnP-RANSAC cannot solve is a failure: no pose, infinite errors,
+    `pnp_failed` true.
 
-    Each batch's network forward and pose decoding is timed and shared evenly among its RoIs; time_s is
-    the sum of these shares over the image's instances (see per_image_times; reading and cropping are not
-    included).
+    Each batch's network forward and each method's pose solving is timed and shared evenly among its RoIs;
+    time_s is the sum of these shares over the image's instances (see per_image_times; reading and
+    cropping are not included).
     """
     geometry = [torch.from_numpy(a).to(device) for a in (obj.pm_points, obj.vertices, obj.symmetries)]
-    records: list[dict[str, Any]] = []
-    errors: dict[str, list[float]] = {}
+    results: dict[str, Predictions] = {m: ([], {}) for m in methods}
+    sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
     for batch in loader:
         b = {k: v.to(device) for k, v in batch.items()}
         tic = time.perf_counter()
-        R, t = decode_pose(model(b["roi_img"], b["roi_coord2d"]), b)
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-        share = (time.perf_counter() - tic) / len(R)
-        errs = {k: v.tolist() for k, v in sample_errors(R, t, b["R"], b["t"], *geometry).items()}
-        for k, v in errs.items():
-            errors.setdefault(k, []).extend(v)
-        per_instance = [dict(zip(errs, e, strict=True)) for e in zip(*errs.values(), strict=True)]
-        rows = zip(batch["key"].tolist(), R.flatten(1).tolist(), t.tolist(), per_instance, strict=True)
-        records += [
-            {"scene_id": s, "im_id": i, "obj_id": obj.obj_id, "R": R_i, "t": t_i, "time_s": share, **e}
-            for (s, i), R_i, t_i, e in rows
-        ]
-    return per_image_times(records), errors
+        out = model(b["roi_img"], b["roi_coord2d"])
+        sync()
+        forward = time.perf_counter() - tic
+        for method, (records, errors) in results.items():
+            tic = time.perf_counter()
+            if method == "ransac":
+                R, t, solved = ransac_poses(out, b, obj.extent, mask_type)
+            else:
+                (R, t), solved = decode_pose(out, b), torch.ones(len(out["rot6d"]), dtype=torch.bool)
+            sync()
+            share = (forward + time.perf_counter() - tic) / len(R)
+            errs = sample_errors(R, t, b["R"], b["t"], *geometry)
+            errs = {k: v.masked_fill(~solved.to(v.device), math.inf).tolist() for k, v in errs.items()}
+            for k, v in errs.items():
+                errors.setdefault(k, []).extend(v)
+            per_instance = [dict(zip(errs, e, strict=True)) for e in zip(*errs.values(), strict=True)]
+            rows = zip(
+                batch["key"].tolist(),
+                R.flatten(1).tolist(),
+                t.tolist(),
+                solved.tolist(),
+                per_instance,
+                strict=True,
+            )
+            for (s, i), R_i, t_i, ok, e in rows:
+                pose = {"R": R_i, "t": t_i} if ok else {"R": None, "t": None, "pnp_failed": True}
+                records.append(
+                    {"scene_id": s, "im_id": i, "obj_id": obj.obj_id, **pose, "time_s": share, **e}
+                )
+    return {m: (per_image_times(records), errors) for m, (records, errors) in results.items()}
 
 
 def per_image_times(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -165,35 +194,59 @@ def evaluate(
     workers: int = 2,
     batch_size: int = BATCH_SIZE,
     obj_id: int | None = None,
+    pnp: str = "patch",
 ) -> EvalResult:
     """Run the checkpoint over the split's instances of object `obj_id` (default: the object it was
-    trained on) on the current device (GPU if any), `batch_size` RoIs at a time.
+    trained on) on the current device (GPU if any), `batch_size` RoIs at a time, solving each pose with
+    `pnp` (patch: the network's Patch-PnP; ransac: PnP-RANSAC on its correspondences).
 
     The batch size changes neither the records (beyond float rounding and their time_s) nor the summary;
     `latency_ms` is the batch-1 network forward, timed by `posenet.bench.measure_latency_ms` on the same
     device.
     """
+    return evaluate_pnp(data, ckpt, (pnp,), split, boxes, image_ids, workers, batch_size, obj_id)[pnp]
+
+
+def evaluate_pnp(
+    data: Path,
+    ckpt: Path,
+    methods: Sequence[str],
+    split: str = "test",
+    boxes: Path | None = None,
+    image_ids: set[int] | None = None,
+    workers: int = 2,
+    batch_size: int = BATCH_SIZE,
+    obj_id: int | None = None,
+) -> dict[str, EvalResult]:
+    """`evaluate` with each PnP method of `methods` on the same network outputs (one forward pass)."""
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     model, state = load_model(ckpt, device)
-    data_cfg = config_from_dict(state["config"]).data
+    train_cfg = config_from_dict(state["config"])
+    data_cfg = train_cfg.data
     if obj_id is not None:
         data_cfg = dataclasses.replace(data_cfg, obj_id=obj_id)
     dataset = open_split(
         data, split, data_cfg, model.config, train=False, boxes_file=boxes, image_ids=image_ids
     )
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, num_workers=workers)
-    records, errors = predict(model, loader, dataset.obj, device)
-    if boxes is not None:
-        records, errors = fail_misses(records, list(errors), read_misses(boxes, data_cfg.obj_id))
+    predicted = predict(model, loader, dataset.obj, device, methods, train_cfg.loss.mask_type)
     latency = measure_latency_ms(model, dummy_inputs(model.config, device), LATENCY_WARMUP, LATENCY_ITERS)
-    summary = summarise(errors, dataset.obj.diameter, dataset.obj.symmetric)
-    summary |= {
-        "latency_ms": latency,
-        "fps": 1000 / latency,
-        "missed": sum(r.get("missed", False) for r in records),
-        "boxes": box_description(boxes),
-    }
-    return EvalResult(state["model_config"]["variant"], summary, records, errors, dataset.obj.diameter)
+    results = {}
+    for method, (records, errors) in predicted.items():
+        if boxes is not None:
+            records, errors = fail_misses(records, list(errors), read_misses(boxes, data_cfg.obj_id))
+        summary = summarise(errors, dataset.obj.diameter, dataset.obj.symmetric)
+        summary |= {
+            "latency_ms": latency,
+            "fps": 1000 / latency,
+            "missed": sum(r.get("missed", False) for r in records),
+            "boxes": box_description(boxes),
+            "pnp": PNP_LABELS[method],
+            "pnp_failed": sum(r.get("pnp_failed", False) and not r.get("missed") for r in records),
+        }
+        variant = state["model_config"]["variant"]
+        results[method] = EvalResult(variant, summary, records, errors, dataset.obj.diameter)
+    return results
 
 
 def bop_results_csv(records: list[dict[str, Any]]) -> str:
@@ -201,7 +254,9 @@ def bop_results_csv(records: list[dict[str, Any]]) -> str:
     mm, space-separated; time = the image's seconds (the same for each of its estimates); score 1.0 (the
     network gives no confidence)."""
     lines = ["scene_id,im_id,obj_id,score,R,t,time"]
-    for r in (r for r in records if not r.get("missed")):  # no estimate: BOP counts it wrong
+    for r in (
+        r for r in records if r["R"] is not None
+    ):  # no estimate (missed, PnP failed): BOP counts it wrong
         R = " ".join(repr(float(v)) for v in r["R"])
         t = " ".join(repr(float(v) * bop.MM_PER_M) for v in r["t"])
         lines.append(f"{r['scene_id']},{r['im_id']},{r['obj_id']},1.0,{R},{t},{r['time_s']!r}")
@@ -230,9 +285,11 @@ def by_factor(
     workers: int = 2,
     batch_size: int = BATCH_SIZE,
     obj_id: int | None = None,
+    pnp: Sequence[str] = ("patch",),
 ) -> dict[str, Any]:
     """ADD@0.02 m (the headline ADD: ADD-S for a symmetric object, `add_metric`) per (factor, group) and
-    variant; sample ids are image ids (scgen: im_id = sample_id).
+    variant; sample ids are image ids (scgen: im_id = sample_id). With PnP methods other than Patch-PnP in
+    `pnp`, each variant has a column per method, named `variant` (Patch-PnP) or `variant PnP-RANSAC`.
 
     With a box file, `groups` is on those boxes and `groups_gt_boxes` on the ground-truth boxes, so each
     group shows the gap the detector costs. The groups file's own split, when it names one, overrides
@@ -247,10 +304,12 @@ def by_factor(
     def per_variant(box_file: Path | None) -> dict[str, list[dict[int, float]]]:
         runs: dict[str, list[dict[int, float]]] = {}
         for ckpt in ckpts:
-            result = evaluate(data, ckpt, split, box_file, wanted, workers, batch_size, obj_id)
-            key, name = headline_add(result.summary["symmetric"])
-            names.add(name)
-            runs.setdefault(result.variant, []).append({r["im_id"]: r[key] for r in result.records})
+            results = evaluate_pnp(data, ckpt, pnp, split, box_file, wanted, workers, batch_size, obj_id)
+            for method, result in results.items():
+                key, name = headline_add(result.summary["symmetric"])
+                names.add(name)
+                column = result.variant if method == "patch" else f"{result.variant} {PNP_LABELS[method]}"
+                runs.setdefault(column, []).append({r["im_id"]: r[key] for r in result.records})
         return runs
 
     tables = {"groups": per_variant(boxes)} | ({"groups_gt_boxes": per_variant(None)} if boxes else {})

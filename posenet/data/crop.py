@@ -71,9 +71,15 @@ def crop(img: np.ndarray, roi: Roi, res: int, nearest: bool, offset: tuple[int, 
     return cv2.warpAffine(img, crop_affine(roi, res, offset), (res, res), flags=flags, borderValue=0)
 
 
+def roi_pixel_centres(center: np.ndarray, scale: float, res: int) -> tuple[np.ndarray, np.ndarray]:
+    """Image coordinates u (of each RoI column) and v (of each RoI row) of the res x res RoI pixel centres
+    of the square of side `scale` around `center` (the inverse of crop_affine)."""
+    grid = (np.arange(res, dtype=np.float64) - (res - 1) / 2) * (scale / res)
+    return grid + center[0], grid + center[1]
+
+
 def roi_coord2d(roi: Roi, res: int, image_size: tuple[int, int]) -> np.ndarray:
     """2 x res x res image coordinates (u / W, v / H) of each RoI pixel centre (GDR-Net's 'abs' coor2d)."""
-    grid = (np.arange(res, dtype=np.float64) - (res - 1) / 2) * (roi.scale / res)
-    u = (grid + roi.center[0]) / image_size[0]
-    v = (grid + roi.center[1]) / image_size[1]
+    u, v = roi_pixel_centres(roi.center, roi.scale, res)
+    u, v = u / image_size[0], v / image_size[1]
     return np.stack(np.broadcast_arrays(u[None, :], v[:, None])).astype(np.float32)
