@@ -165,7 +165,9 @@ class RunLog:
             for key, value in row.items():
                 if key not in ("step", "epoch"):
                     self.tb.add_scalar(
-                        key if key in ("lr", "loss", "step_s") else f"loss/{key}", value, row["step"]
+                        key if key in ("lr", "loss", "step_s", "images") else f"loss/{key}",
+                        value,
+                        row["step"],
                     )
 
     def close(self) -> None:
@@ -244,6 +246,7 @@ class _Run:
     world: int
     step: int  # optimisation steps done
     stop: int  # the step this invocation stops at
+    weight_spread: float = 0.0  # largest weight difference between DDP processes, measured at the stop
 
 
 def _set_up(
@@ -366,6 +369,7 @@ def _checkpoint(run: _Run) -> dict[str, Any]:
         "model_config": run.model.config_dict(),
         "config": run.cfg.to_dict(),
         "world_size": run.world,
+        "rank_weight_spread": run.weight_spread,
         "amp": run.precision.mode,
         "grad_scaler": run.precision.scaler.state_dict(),
         "object": {"extent": run.dataset.obj.extent.tolist(), "diameter": run.dataset.obj.diameter},
@@ -386,25 +390,41 @@ def _loop(run: _Run, ckpt: Path | None, log: RunLog | None) -> None:
         epoch, skip = divmod(run.step, run.sampler.steps_per_epoch)
         run.sampler.set_epoch(epoch, skip)
         _train_epoch(run, epoch, log)
+        if run.step >= run.stop and run.world > 1:  # every process, before rank 0 saves
+            run.weight_spread = rank_weight_spread(run.model)
+            if ckpt is not None:
+                tqdm.write(f"DDP: {run.world} processes, largest weight difference: {run.weight_spread:.1e}")
         if ckpt is not None and (run.step >= run.stop or (epoch + 1) % run.cfg.optim.ckpt_every == 0):
             save_checkpoint(ckpt, _checkpoint(run))
 
 
+def rank_weight_spread(model: torch.nn.Module) -> float:
+    """The largest difference of any weight between the DDP processes: 0 while DDP keeps them in sync
+    (same initial weights, all-reduced gradients, the same optimiser steps)."""
+    flat = torch.cat([p.detach().float().flatten() for p in model.parameters()])
+    high, low = flat.clone(), flat.clone()
+    dist.all_reduce(high, op=dist.ReduceOp.MAX)
+    dist.all_reduce(low, op=dist.ReduceOp.MIN)
+    return float((high - low).max())
+
+
 def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
     """The sampler's batches of `epoch` up to the stop step: one step each, losses averaged over the
-    processes and logged."""
+    processes and logged with the images the step took over all processes (the global batch)."""
     tic = time.perf_counter()
     for batch in run.loader:
         values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm, run.cfg, run.precision)
         lr = run.optimizer.param_groups[0]["lr"]
         run.scheduler.step()
         run.step += 1
+        images = torch.tensor([float(len(batch["roi_img"]))], device=values.device)
         if run.world > 1:
             dist.all_reduce(values)
+            dist.all_reduce(images)
             values /= run.world
         if log is not None:
             toc = time.perf_counter()
-            losses = dict(zip(("loss", *LOSS_TERMS), values.tolist(), strict=True))
+            losses = dict(zip(("loss", *LOSS_TERMS), values.tolist(), strict=True)) | {"images": int(images)}
             log.step({"step": run.step, "epoch": epoch, "lr": lr, "step_s": toc - tic, **losses})
             tic = toc
         if run.step >= run.stop:

@@ -120,16 +120,33 @@ def test_a_step_cap_beyond_the_schedule_is_reported(
 
 
 def test_ddp_with_gloo_on_two_processes(dataset_dir: Path, tiny_config: Path, tmp_path: Path) -> None:
+    """`torchrun --standalone --nproc-per-node 2 -m posenet.cli train` (gloo): the global batch of 4 is
+    split 2 + 2 (4 images a step, 16 training images: 4 steps an epoch), both processes end with identical
+    weights, and the checkpoint resumes in a single process."""
     out = tmp_path / "ddp"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", "2"]
     cmd += ["-m", "posenet.cli", "train", "--data", str(dataset_dir), "--out", str(out)]
-    cmd += ["--config", str(tiny_config), "--max-steps", "2"]
+    cmd += ["--config", str(tiny_config), "--max-steps", "5"]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 0, proc.stderr[-3000:]
+    print(proc.stdout)
+    assert "DDP: 2 processes, largest weight difference: 0.0e+00" in proc.stdout
     state = torch.load(out / "last.pt", weights_only=True)
-    assert state["world_size"] == 2 and state["step"] == 2
-    assert sorted(losses(out)) == [1, 2]
+    assert state["world_size"] == 2 and state["step"] == 5 and state["rank_weight_spread"] == 0.0
+    rows = [json.loads(line) for line in (out / "train_log.jsonl").read_text().splitlines()]
+    assert [(r["step"], r["epoch"], r["images"]) for r in rows] == [
+        (1, 0, 4),
+        (2, 0, 4),
+        (3, 0, 4),
+        (4, 0, 4),
+        (5, 1, 4),
+    ]
+    code, output = posenet("train", "--data", dataset_dir, "--out", out, "--resume", "--max-steps", 7)
+    assert code == 0, output
+    state = torch.load(out / "last.pt", weights_only=True)
+    assert state["world_size"] == 1 and state["step"] == 7
+    assert sorted(losses(out)) == [1, 2, 3, 4, 5, 6, 7]
 
 
 def test_refusals_are_one_line_and_write_nothing(
