@@ -17,7 +17,7 @@ import numpy as np
 import trimesh
 
 from scgen.errors import ScgenError
-from scgen.scenes.lens import is_pinhole
+from scgen.scenes.lens import DIST_KEYS, is_pinhole
 from scgen.scenes.spec import CameraSpec
 
 MM_PER_M = 1000.0
@@ -189,9 +189,18 @@ def camera_K(entry: dict[str, Any]) -> np.ndarray:
     return np.asarray(entry["cam_K"], dtype=np.float64).reshape(3, 3)
 
 
+def camera_dist(entry: dict[str, Any]) -> tuple[float, ...]:
+    """The lens distortion of a scene_camera.json entry: its cam_dist (OpenCV's k1, k2, p1, p2, k3), or
+    zeros (a pinhole camera) without one."""
+    dist = tuple(float(k) for k in entry.get("cam_dist", (0.0,) * len(DIST_KEYS)))
+    if len(dist) != len(DIST_KEYS):
+        raise ScgenError(f"cam_dist has {len(dist)} coefficients, not OpenCV's {len(DIST_KEYS)}: {dist}")
+    return dist
+
+
 def camera_spec(entry: dict[str, Any], width: int, height: int) -> CameraSpec:
     """The camera of a scene_camera.json entry: cam_K and, where present, the lens' cam_dist."""
-    dist = tuple(float(k) for k in entry.get("cam_dist", ()))
+    dist = camera_dist(entry)
     K = tuple(float(k) for k in entry["cam_K"])
     exposure_ev = float(entry.get("exposure_ev", 0.0))
     return CameraSpec(width, height, K, exposure_ev, () if is_pinhole(dist) else dist)

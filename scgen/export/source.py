@@ -17,8 +17,6 @@ from scgen.bop_dataset import BopImage, open_bop_dataset
 from scgen.dataset import OBJ_ID, TARGET_INSTANCE, Layout, open_dataset, read_metadata
 from scgen.errors import ScgenError
 
-N_DIST = 5  # OpenCV's k1, k2, p1, p2, k3: scene_camera.json's cam_dist (absent: a pinhole camera)
-
 
 @dataclass(frozen=True)
 class Sample:
@@ -95,12 +93,4 @@ def _sample(layout: Layout, rgb_format: str, image: BopImage, row: dict[str, str
         raise ScgenError(f"sample {sid}: no target entry in {path}") from exc
     K = np.asarray(image.K, dtype=np.float64).reshape(3, 3)
     return Sample(sid, split, rgb, layout.mask(split, sid, visib=True), R, t, K,
-                  camera_dist(cameras[str(sid)], sid), info, row)  # fmt: skip
-
-
-def camera_dist(entry: dict[str, Any], sample_id: int) -> np.ndarray:
-    """The lens distortion of a scene_camera.json entry: its cam_dist, or zeros (pinhole) without one."""
-    dist = np.asarray(entry.get("cam_dist", np.zeros(N_DIST)), dtype=np.float64).reshape(-1)
-    if dist.shape != (N_DIST,):
-        raise ScgenError(f"sample {sample_id}: cam_dist has {dist.size} coefficients, not OpenCV's {N_DIST}")
-    return dist
+                  np.asarray(bop.camera_dist(cameras[str(sid)])), info, row)  # fmt: skip
