@@ -57,15 +57,23 @@ def zoom(img: np.ndarray, bbox: list[int], size: tuple[int, int]) -> np.ndarray:
     return cv2.resize(crop, size, interpolation=cv2.INTER_NEAREST)
 
 
-def labels(spec: SceneSpec, ann: Annotation, distance_group: str) -> list[str]:
-    """Caption lines: the factor groups of the robustness table, with their measured values."""
+def labels(spec: SceneSpec, ann: Annotation, distance_group: str, exposure_ev: float) -> list[str]:
+    """Caption lines: the factor groups of the robustness table, with their measured values, and the
+    exposure the camera used."""
     caster = "caster" if spec.shadow_caster else "no caster"
     return [
-        f"#{spec.index} {spec.sun.level} (EV{spec.camera.exposure_ev:+.1f})  {spec.background.kind}"
+        f"#{spec.index} {spec.sun.level} (EV{exposure_ev:+.1f})  {spec.background.kind}"
         f"  {distance_group} {spec.distance_m:.2f} m",
         f"shadow {ann.shadow_label} {ann.shadow_fraction:.2f} ({caster})",
         f"occlusion {ann.occlusion_group} {ann.r_occ:.2f} (aim {spec.requested_occlusion})",
     ]
+
+
+def display_rgb(image: np.ndarray) -> np.ndarray:
+    """A recorded image as 8-bit RGB for the sheet: 16-bit codes to their top byte, one channel to grey."""
+    if image.dtype == np.uint16:
+        image = (image >> 8).astype(np.uint8)
+    return np.repeat(image[..., None], 3, axis=2) if image.ndim == 2 else image
 
 
 def sample_tile(rgb: np.ndarray, ann: Annotation, xyz_rgb: np.ndarray, caption: list[str]) -> np.ndarray:
@@ -114,7 +122,8 @@ def build_preview(generator: Generator, n: int) -> np.ndarray:
             sample = generator.sample(i)
             spec, ann = sample.spec, sample.annotation
             (group,), _ = distance_groups(np.array([spec.distance_m]), d_lo, d_hi)
-            caption = labels(spec, ann, group)
+            record = sample.buffers.camera
+            caption = labels(spec, ann, group, record.exposure_ev if record else spec.camera.exposure_ev)
             xyz_rgb = xyz_colours(ann.xyz, ann.mask_visib, lo, hi)
-            tiles.append(sample_tile(sample.buffers.rgb, ann, xyz_rgb, caption))
+            tiles.append(sample_tile(display_rgb(sample.buffers.rgb), ann, xyz_rgb, caption))
     return contact_sheet(tiles)
