@@ -20,7 +20,7 @@ from scgen.render.camera import record_image, render_camera
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, check_quality, render_seed
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_llvm import mitsuba_setup
-from scgen.render.mitsuba_materials import box_uv, build_bsdfs, finish_bsdf, texture_scale
+from scgen.render.mitsuba_materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
 from scgen.render.props import prop_mesh
 from scgen.scenes.finish import finished
 from scgen.scenes.spec import SceneSpec
@@ -64,6 +64,7 @@ class MitsubaBackend:
         self.spp = QUALITY_SPP[quality]
         self.bsdfs = build_bsdfs()
         self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
+        self._finishes = TargetFinishes()
 
     def close(self) -> None:
         pass
@@ -72,12 +73,13 @@ class MitsubaBackend:
         """Mitsuba meshes of the target parts and of the props, in the camera frame."""
         T = spec.target.matrix
         target, props = [], []
-        bsdfs = {cls: finish_bsdf(finished(spec.finish, cls)) for cls in spec.finish}  # the sample's finish
         for k, (material, mesh) in enumerate(self.model.parts):
             m = mesh.copy()
             m.apply_transform(T)
             drawn = spec.finish[material]["material"] if material in spec.finish else material
-            bsdf = bsdfs.get(material, self.bsdfs[material])
+            bsdf = self.bsdfs[material]
+            if material in spec.finish:  # the sample's finish
+                bsdf = self._finishes.bsdf(material, drawn, finished(spec.finish, material))
             target.append(_mesh(f"target{k}", np.asarray(m.vertices), np.asarray(m.faces),
                                 self._part_uv(k, drawn), bsdf))  # fmt: skip
         for k, prop in enumerate(spec.props):

@@ -44,9 +44,11 @@ def crinkle_normal_map(slope: float = CRINKLE_SLOPE) -> np.ndarray:
     """A tileable tangent-space normal map (512 x 512 x 3 in [0, 1]) of crumpled foil; `slope` scales
     the height gradient (the crinkle's strength)."""
     gx, gy = _crinkle_gradient()
-    n = np.stack([-slope * gx, -slope * gy, np.ones_like(gx)], -1)
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    return (0.5 * n + 0.5).astype(np.float32)
+    nx, ny = -slope * gx, -slope * gy
+    length = np.sqrt(nx * nx + ny * ny + 1.0)  # as np.linalg.norm sums it: the nominal map's bytes
+    return np.stack([0.5 * (nx / length) + 0.5, 0.5 * (ny / length) + 0.5, 0.5 / length + 0.5], -1).astype(
+        np.float32
+    )
 
 
 def cell_texture(
@@ -86,6 +88,33 @@ def finish_bsdf(m: Material) -> mi.BSDF:
         normals = _bitmap(crinkle_normal_map(CRINKLE_SLOPE * m.crinkle), raw=True)
         bsdf = {"type": "normalmap", "normalmap": normals, "bsdf": bsdf}
     return mi.load_dict(bsdf)
+
+
+class TargetFinishes:
+    """The target's BSDFs under per-sample finishes: one per (part class, class drawn), built on first
+    use, then set to each sample's values in place (mi.traverse) instead of being built again."""
+
+    def __init__(self) -> None:
+        self._bsdfs: dict[tuple[str, str], mi.BSDF] = {}
+
+    def bsdf(self, part_class: str, drawn: str, m: Material) -> mi.BSDF:
+        """The BSDF of `m` (a finish of class `drawn`) for the parts of class `part_class`."""
+        key = (part_class, drawn)
+        if key not in self._bsdfs:
+            self._bsdfs[key] = finish_bsdf(m)
+            return self._bsdfs[key]
+        params = mi.traverse(self._bsdfs[key])
+        inner = "nested_bsdf." if m.detail == "crinkle" else ""
+        if m.detail == "cells":
+            params["base_color.data"] = mi.TensorXf(cell_texture(m.base))
+        else:
+            params[inner + "base_color.value"] = mi.Color3f(*m.base)
+        params[inner + "roughness.value"] = m.roughness
+        params[inner + "metallic.value"] = m.metallic
+        if m.detail == "crinkle":
+            params["normalmap.data"] = mi.TensorXf(crinkle_normal_map(CRINKLE_SLOPE * m.crinkle))
+        params.update()
+        return self._bsdfs[key]
 
 
 def texture_scale(material: str, size: float) -> float:

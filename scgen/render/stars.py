@@ -62,11 +62,13 @@ def project_stars(camera: CameraSpec, frame: np.ndarray) -> tuple[np.ndarray, np
     """(pixel positions N x 2, Hp magnitudes, B-V) of the catalogue stars in front of the camera and
     within half a pixel of the image, for the celestial attitude `frame` (ICRS -> camera)."""
     xyz, hp, bv = hipparcos()
-    d = xyz @ frame.T
     w, h = camera.width, camera.height
-    near = d[:, 2] > 1e-3
-    near[near] = _within(project(camera.K_mat, d[near]), w, h, 0.5 * w, 0.5 * h)  # where lens models hold
-    uv = camera.project(d[near])
+    corners = camera.rays(np.array([-1.0, w, -1.0, w]), np.array([-1.0, -1.0, h, h]))
+    cos_edge = np.min(corners[:, 2] / np.linalg.norm(corners, axis=1))  # the widest corner, off the axis
+    near = np.flatnonzero(xyz @ frame[2] > max(cos_edge - 0.05, 1e-3))  # stars about the field of view
+    d = xyz[near] @ frame.T
+    near = near[_within(project(camera.K_mat, d), w, h, 0.5 * w, 0.5 * h)]  # where lens models hold
+    uv = camera.project(xyz[near] @ frame.T)
     inside = _within(uv, w, h, 1.0, 1.0)
     return uv[inside], hp[near][inside], bv[near][inside]
 
