@@ -1,6 +1,6 @@
-"""Draw docs/real_sky.png (issue 30): real renders through the ideal camera, three rows of four panels.
+"""Draw docs/real_sky.jpg (issue 30): real renders through the ideal camera, three rows of four panels.
 
-    python docs/sky_figure.py [--backend mitsuba] [--quality default] [--out docs/real_sky.png]
+    python docs/sky_figure.py [--backend mitsuba] [--quality default] [--out docs/real_sky.jpg]
 
 1. The Blue Marble Earth: two low-orbit limbs and two distant discs (samples of seed 1 with an Earth).
 2. The Hipparcos sky behind the target: one scene at the true star brightness (black, as in flight
@@ -78,11 +78,11 @@ def finish_row(render: dict) -> list[np.ndarray]:
 @click.command()
 @click.option("--backend", default="mitsuba")
 @click.option("--quality", default="default")
-@click.option("--out", type=click.Path(path_type=Path), default=Path("docs/real_sky.png"))
+@click.option("--out", type=click.Path(path_type=Path), default=Path("docs/real_sky.jpg"))
 def main(backend: str, quality: str, out: Path) -> None:
     render = {"backend": backend, "quality": quality}
     rows = [np.concatenate(row(render), axis=1) for row in (earth_row, stars_row, finish_row)]
-    cv2.imwrite(str(out), np.concatenate(rows, axis=0)[..., ::-1])
+    cv2.imwrite(str(out), np.concatenate(rows, axis=0)[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 90])
     print(f"wrote {out}")
 
 
