@@ -22,6 +22,7 @@ from posenet.errors import PosenetError
 from posenet.evaluate import (
     BATCH_SIZE,
     bop_results_csv,
+    by_factor_table,
     evaluate_pnp,
     format_table,
     json_record,
@@ -40,33 +41,6 @@ from scgen.cli_errors import one_line_errors
 from scgen.errors import ScgenError
 
 PATH = click.Path(path_type=Path)
-
-
-def _percent(value: float | None) -> str:
-    return "-" if value is None else f"{100 * value:.2f}"
-
-
-def _by_factor_table(res: dict) -> str:
-    """`evaluate.by_factor`'s result as a table: a column per variant, and with a box file each one's gap
-    to the same on ground-truth boxes."""
-    cols, gt = res["columns"], res.get("groups_gt_boxes")
-    header = [f"{res['add_metric']}@0.02m (%)", "n"]
-    header += [h for c in cols for h in ((c, f"{c} vs GT boxes (pp)") if gt else (c,))]
-    rows = []
-    for factor, groups in res["groups"].items():
-        for group, vals in groups.items():
-            row = [f"{factor}/{group}", str(res["n"][factor][group])]
-            for c in cols:
-                row.append(_percent(vals[c]))
-                if gt:
-                    row.append(_gap(vals[c], gt[factor][group][c]))
-            rows.append(row)
-    return format_table(header, rows)
-
-
-def _gap(value: float | None, on_gt: float | None) -> str:
-    """The gap in percentage points of a figure on detected boxes to the same on GT boxes."""
-    return "-" if value is None or on_gt is None else f"{100 * (value - on_gt):+.2f}"
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -196,7 +170,7 @@ def eval_cmd(
             raise PosenetError("--bop-csv writes the estimates of one checkpoint, not a --by-factor table")
         res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers, batch_size, obj_id, methods)
         click.echo(f"boxes: {res['boxes']}")
-        click.echo(_by_factor_table(res))
+        click.echo(by_factor_table(res))
         if json_path is not None:
             atomic_write_text(json_path, json.dumps(res, indent=2) + "\n")
         return

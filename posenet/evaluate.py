@@ -368,3 +368,30 @@ def format_table(header: list[str], rows: list[list[str]]) -> str:
         for r in cells
     ]
     return "\n".join([lines[0], "-" * len(lines[0]), *lines[1:]])
+
+
+def _percent(value: float | None) -> str:
+    return "-" if value is None else f"{100 * value:.2f}"
+
+
+def by_factor_table(res: dict[str, Any]) -> str:
+    """`by_factor`'s result as a table: a column per variant (and PnP method), and with a box file each
+    one's gap to the same on ground-truth boxes."""
+    cols, gt = res["columns"], res.get("groups_gt_boxes")
+    header = [f"{res['add_metric']}@0.02m (%)", "n"]
+    header += [h for c in cols for h in ((c, f"{c} vs GT boxes (pp)") if gt else (c,))]
+    rows = []
+    for factor, groups in res["groups"].items():
+        for group, vals in groups.items():
+            row = [f"{factor}/{group}", str(res["n"][factor][group])]
+            for c in cols:
+                row.append(_percent(vals[c]))
+                if gt:
+                    row.append(_gap(vals[c], gt[factor][group][c]))
+            rows.append(row)
+    return format_table(header, rows)
+
+
+def _gap(value: float | None, on_gt: float | None) -> str:
+    """The gap in percentage points of a figure on detected boxes to the same on GT boxes."""
+    return "-" if value is None or on_gt is None else f"{100 * (value - on_gt):+.2f}"
