@@ -32,6 +32,8 @@ from posenet.errors import PosenetError
 from posenet.models import PRESETS, ModelConfig
 from posenet.models.backbone import IMAGENET, PACKAGE
 
+AUGMENTS = ("paper", "spnv2", "gdrnet-occlusion")  # data.augment: posenet.data.photometric's chains
+
 
 @dataclass
 class DataConfig:
@@ -52,6 +54,12 @@ class DataConfig:
     bg_prob: float = 0.5  # background replacement
     bg_from_dataset: float = 0.5  # share of replacements taken from other dataset images (else noise)
     bg_pool_size: int = 32  # target-free backgrounds each loader process keeps in memory
+    # GDR-Net's TRUNCATE_FG: a background replacement also cuts away part of the visible target (0.8 of
+    # the time; augment.draw_cut), and every target follows the cut visible mask
+    truncate_fg: bool = False
+    # photometric chain (data/photometric.py): paper (brightness/contrast, color_prob) | spnv2 |
+    # gdrnet-occlusion (applied with color_prob)
+    augment: str = "paper"
     workers: int = 4  # DataLoader worker processes per training process
 
 
@@ -228,6 +236,8 @@ def _validate(cfg: TrainConfig) -> None:
     for name in ("dzi_prob", "color_prob", "bg_prob", "bg_from_dataset", "min_visib_fract"):
         if not 0.0 <= getattr(d, name) <= 1.0:
             raise PosenetError(f"data.{name} must lie in [0, 1], got {getattr(d, name)}")
+    if d.augment not in AUGMENTS:
+        raise PosenetError(f"data.augment must be one of {', '.join(AUGMENTS)}, got {d.augment!r}")
     if cfg.loss.mask_type not in ("bce", "l1"):
         raise PosenetError(f"loss.mask_type must be 'bce' or 'l1', got {cfg.loss.mask_type!r}")
     if min(o.batch_size, o.epochs, o.log_every, o.ckpt_every) < 1 or o.lr <= 0 or o.eps <= 0:

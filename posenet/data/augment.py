@@ -1,10 +1,14 @@
-"""The paper's training augmentations on a cropped RoI: brightness/contrast and background replacement.
+"""The paper's training augmentations on a cropped RoI: brightness/contrast and background replacement;
+and GDR-Net's foreground truncation (TRUNCATE_FG) with it.
 
-(Scale perturbation is DZI jitter, see crop.py.) Backgrounds come from the dataset's own images with the
-target painted out, or are procedural noise: nothing is downloaded.
+(Scale perturbation is DZI jitter, see crop.py; the albumentations chains are in photometric.py.)
+Backgrounds come from the dataset's own images with the target painted out, or are procedural noise:
+nothing is downloaded.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -53,3 +57,43 @@ def random_view(bg: np.ndarray, res: int, rng: np.random.Generator) -> np.ndarra
 def replace_background(img: np.ndarray, keep: np.ndarray, bg: np.ndarray) -> np.ndarray:
     """Pixels where `keep` is 0 replaced by `bg` (all float32 RGB, same size)."""
     return np.where(keep[..., None] > 0, img, bg)
+
+
+class Cut(NamedTuple):
+    """A straight cut across a RoI, in coordinates normalised to the RoI side (0 to 1): pixels whose centre
+    lies on the dropped side of `line` along `axis` (0: rows, 1: columns) are cut away."""
+
+    axis: int
+    line: float
+    drop_before: bool  # True: drop what lies before the line (top / left), else after it
+
+
+def draw_cut(visible: np.ndarray, rng: np.random.Generator) -> Cut | None:
+    """GDR-Net's TRUNCATE_FG (`trunc_mask`): with probability 0.2 each, cut the visible target's top,
+    bottom, left or right part at a line drawn uniformly between its box edge and its box centre; else
+    (0.2, or nothing visible) no cut."""
+    rows, cols = np.nonzero(visible)
+    side = rng.random()
+    if side >= 0.8 or not len(rows):
+        return None
+    res = visible.shape[0]
+    axis = 0 if side < 0.4 else 1
+    coords = (rows if axis == 0 else cols) + 0.5
+    lo, hi = coords.min() / res, coords.max() / res
+    centre = (lo + hi) / 2
+    before = side < 0.2 or 0.4 <= side < 0.6
+    return Cut(axis, rng.uniform(lo, centre) if before else rng.uniform(centre, hi), before)
+
+
+def apply_cut(mask: np.ndarray, cut: Cut | None) -> np.ndarray:
+    """`mask` (res x res, any resolution of the same RoI) with the cut-away pixels zeroed."""
+    if cut is None:
+        return mask
+    centres = (np.arange(mask.shape[0]) + 0.5) / mask.shape[0]
+    dropped = centres < cut.line if cut.drop_before else centres >= cut.line
+    out = mask.copy()
+    if cut.axis == 0:
+        out[dropped] = 0
+    else:
+        out[:, dropped] = 0
+    return out

@@ -52,6 +52,17 @@ def roi_from_box(
     return Roi(center=center, scale=scale, box_wh=np.array([w, h], dtype=np.float64))
 
 
+def box_in_roi(bbox: tuple[float, float, float, float], roi: Roi) -> tuple[float, float, float, float]:
+    """The box [x, y, w, h] (pixel edges) as (x0, y0, x1, y1) in coordinates normalised to the RoI square
+    (0 to 1), clipped to it."""
+    x, y, w, h = (float(v) for v in bbox)
+    # box_center's convention: pixel x covers [x - 0.5, x + 0.5], so the box spans [x - 0.5, x + w - 0.5]
+    edges = np.array([x - 0.5, y - 0.5, x + w - 0.5, y + h - 0.5])
+    norm = (edges - np.tile(roi.center, 2)) / roi.scale + 0.5
+    x0, y0, x1, y1 = np.clip(norm, 0.0, 1.0)
+    return float(x0), float(y0), float(x1), float(y1)
+
+
 def crop_affine(roi: Roi, res: int, offset: tuple[int, int] = (0, 0)) -> np.ndarray:
     """2x3 affine from image pixels (of a sub-image starting at `offset` = (x0, y0)) to RoI pixels."""
     s = res / roi.scale

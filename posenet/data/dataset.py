@@ -19,10 +19,11 @@ from torch.utils.data import Dataset
 from posenet.config import DataConfig
 from posenet.data import augment
 from posenet.data.boxes import Box, read_boxes
-from posenet.data.crop import Roi, crop, roi_coord2d, roi_from_box
+from posenet.data.crop import Roi, box_in_roi, crop, roi_coord2d, roi_from_box
 from posenet.data.io import read_bgr, read_mask, read_xyz
 from posenet.data.layout import Instance, scan_split
 from posenet.data.object_model import ObjectModel, load_object_model
+from posenet.data.photometric import photometric
 from posenet.errors import PosenetError
 from posenet.geometry import site_encode
 from posenet.models import ModelConfig
@@ -78,8 +79,9 @@ class PoseDataset(Dataset):
         roi = self._roi(inst, rng)
         # full-resolution full and visible masks: each file is read once per item
         full, visib = (read_mask(inst.mask), read_mask(inst.mask_visib)) if self.train else (None, None)
+        roi_img, cut = self._roi_image(inst, roi, rng, visib)
         item = {
-            "roi_img": self._roi_image(inst, roi, rng, visib),
+            "roi_img": roi_img,
             "roi_coord2d": torch.from_numpy(roi_coord2d(roi, self.output_res, inst.image_size)),
             "K": torch.from_numpy(inst.K).float(),
             "R": torch.from_numpy(inst.R).float(),
@@ -90,7 +92,7 @@ class PoseDataset(Dataset):
             "key": torch.tensor(inst.key),
         }
         if full is not None and visib is not None:
-            item.update(self._targets(inst, roi, full, visib))
+            item.update(self._targets(inst, roi, full, visib, cut))
             item["site"] = site_encode(
                 item["t"], item["K"], item["crop_center"], item["box_wh"], item["resize_ratio"]
             )
@@ -107,18 +109,33 @@ class PoseDataset(Dataset):
 
     def _roi_image(
         self, inst: Instance, roi: Roi, rng: np.random.Generator | None, visib: np.ndarray | None
-    ) -> torch.Tensor:
-        """The RoI crop, augmented when `rng` is given; `visib` is the full-resolution visible mask."""
+    ) -> tuple[torch.Tensor, augment.Cut | None]:
+        """The RoI crop, augmented when `rng` is given (`visib` is the full-resolution visible mask), and
+        the foreground truncation's cut (data.truncate_fg), which the targets follow."""
         bgr = crop(read_bgr(inst.rgb), roi, self.input_res, nearest=False)
         img = bgr[..., ::-1].astype(np.float32) / 255.0
+        cut = None
         if rng is not None and visib is not None and rng.random() < self.cfg.bg_prob:
             # keep only the visible target, as GDR-Net does: keeping the full mask would keep the part of
             # an occluder that covers the target, whose edge would trace the target's hidden outline
             keep = crop(visib, roi, self.input_res, nearest=True)
+            if self.cfg.truncate_fg:
+                cut = augment.draw_cut(keep, rng)
+                keep = augment.apply_cut(keep, cut)
             img = augment.replace_background(img, keep, self._background(rng))
-        if rng is not None and rng.random() < self.cfg.color_prob:
-            img = augment.brightness_contrast(img, rng, self.cfg.brightness, self.cfg.contrast)
-        return torch.from_numpy(np.ascontiguousarray(img.transpose(2, 0, 1)))
+        if rng is not None:
+            img = self._photometric(img, inst, roi, rng)
+        return torch.from_numpy(np.ascontiguousarray(img.transpose(2, 0, 1))), cut
+
+    def _photometric(self, img: np.ndarray, inst: Instance, roi: Roi, rng: np.random.Generator) -> np.ndarray:
+        """data.augment's colour chain: the paper's brightness/contrast or GDR-Net's chain with probability
+        color_prob, or SPNv2's (each of its transforms at p 0.5)."""
+        name = self.cfg.augment
+        if name == "spnv2" or rng.random() < self.cfg.color_prob:
+            if name == "paper":
+                return augment.brightness_contrast(img, rng, self.cfg.brightness, self.cfg.contrast)
+            return photometric(name, img, box_in_roi(inst.bbox_obj, roi), rng)
+        return img
 
     def _background(self, rng: np.random.Generator) -> np.ndarray:
         if rng.random() >= self.cfg.bg_from_dataset or self.cfg.bg_pool_size == 0:
@@ -133,13 +150,14 @@ class PoseDataset(Dataset):
         return augment.paint_out(read_bgr(inst.rgb)[..., ::-1].copy(), read_mask(inst.mask))
 
     def _targets(
-        self, inst: Instance, roi: Roi, full_mask: np.ndarray, visib_mask: np.ndarray
+        self, inst: Instance, roi: Roi, full_mask: np.ndarray, visib_mask: np.ndarray, cut: augment.Cut | None
     ) -> dict[str, torch.Tensor]:
-        """Dense training targets at output resolution from the full-resolution masks and the xyz map."""
+        """Dense training targets at output resolution from the full-resolution masks and the xyz map; the
+        visible mask (and with it xyz and regions) without what a foreground truncation `cut` away."""
         r = self.output_res
         x0, y0 = inst.xyz_box[:2]
         xyz = crop(read_xyz(inst.xyz), roi, r, nearest=True, offset=(x0, y0))
-        visib = crop(visib_mask, roi, r, nearest=True)
+        visib = augment.apply_cut(crop(visib_mask, roi, r, nearest=True), cut)
         full = crop(full_mask, roi, r, nearest=True)
         xyz_n = np.where(visib[..., None] > 0, xyz / self.obj.extent + 0.5, 0.0).astype(np.float32)
         return {
