@@ -11,10 +11,9 @@ from scgen.buffers import BACKGROUND_ID
 from scgen.generator import Generator
 from scgen.model import load_target
 from scgen.render.backgrounds import background_image
-from scgen.render.earth_surface import CLOUD_THRESHOLD, cloud_map, disc_albedo
+from scgen.render.earth_surface import CLOUD_THRESHOLD, cloud_cover, disc_albedo
 from scgen.render.lighting import SOLAR_CONSTANT, earth_albedo_light, exposure_scale
 from scgen.render.stars import SUN_V, pixel_solid_angle, project_stars, star_image, tint
-from scgen.render.textures import equirect
 from scgen.scenes import load_config
 from scgen.scenes.geometry import orthonormal_basis, unit_sphere_hits
 from scgen.scenes.sky import OBLIQUITY_RAD, earth_frame, sky_frame, sky_labels
@@ -68,7 +67,7 @@ def test_blue_marble_oceans_are_darker_and_flatter_than_land(model):
         cols = np.clip(((np.arctan2(q[:, 1], q[:, 0]) / (2 * np.pi) + 0.5) * w).astype(int), 0, w - 1)
         mu_s = n @ sun
         albedo = img[hit].mean(axis=1) / (spec.sun.irradiance * exposure_scale(spec)) / np.maximum(mu_s, 1e-3)
-        clear = equirect(cloud_map(spec.background.seed), q) < CLOUD_THRESHOLD - 0.4  # no cloud, nor detail
+        clear = cloud_cover(spec.background.seed, q) < CLOUD_THRESHOLD - 0.4  # no cloud, nor its detail
         lit = (mu_s > 0.4) & (np.abs(q[:, 2]) < 0.8) & clear  # sunlit, away from the ice caps
         water.append(albedo[lit & (water_map[rows, cols] == 255)])
         land.append(albedo[lit & (water_map[rows, cols] == 0)])

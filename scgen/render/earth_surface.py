@@ -25,8 +25,9 @@ CLOUD_STREAM = 1  # Blue Marble clouds: np.random.default_rng([background seed, 
 # Blue Marble clouds: cover = clip(CLOUD_GAIN * (noise - CLOUD_THRESHOLD)), half the globe under some cloud
 # and a mean cover of about 0.33, so the disc reflects about the Earth's Bond albedo, 0.3
 CLOUD_THRESHOLD, CLOUD_GAIN = 0.0, 0.8
-LAND_DETAIL, CLOUD_DETAIL = 0.35, 0.12  # contrast of the sub-map detail (log albedo; cloud cover)
+LAND_DETAIL, CLOUD_DETAIL = 0.35, 0.4  # contrast of the sub-map detail (log albedo, log cloud cover)
 LUMA = np.array([0.2126, 0.7152, 0.0722])
+POLE_TO_EQUATOR = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # a turn about y
 DISC_POINTS = 4096  # surface points averaged by disc_albedo
 
 
@@ -56,6 +57,16 @@ def cloud_map(seed: int) -> np.ndarray:
     return periodic_noise(rng, *EARTH_MAP, beta=2.4, aspect=0.7)
 
 
+def cloud_cover(seed: int, q: np.ndarray) -> np.ndarray:
+    """The cloud field (zero mean, unit deviation) at Earth-fixed unit vectors q (N x 3). Near the poles,
+    where an equirectangular map pinches into radial streaks, it is read in a frame turned by 90 degrees
+    (the poles on its equator), blended in between at the same deviation."""
+    field = cloud_map(seed)
+    w = np.clip((0.85 - np.abs(q[:, 2])) / 0.25, 0.0, 1.0)  # 1 below 37 deg of latitude, 0 above 58
+    polar = equirect(field, q @ POLE_TO_EQUATOR.T)
+    return (w * equirect(field, q) + (1 - w) * polar) / np.sqrt(w**2 + (1 - w) ** 2)
+
+
 def bluemarble_surface(q: np.ndarray, lod: np.ndarray, seed: int) -> tuple[np.ndarray, ...]:
     """(albedo N x 3, water N x 1, cloud N x 1): Blue Marble at level of detail `lod` (see
     bluemarble.lookup), flat oceans, and procedural clouds from `seed`."""
@@ -63,8 +74,8 @@ def bluemarble_surface(q: np.ndarray, lod: np.ndarray, seed: int) -> tuple[np.nd
     water = texel[:, 3:]
     ground = texel[:, :3] * np.exp(LAND_DETAIL * bluemarble.detail(q, lod))[:, None]
     surface = (1 - water) * ground + water * EARTH_OCEAN
-    cover = equirect(cloud_map(seed), q) + CLOUD_DETAIL * bluemarble.detail(q, lod, offset=97.0)
-    cloud = np.clip((cover - CLOUD_THRESHOLD) * CLOUD_GAIN, 0, 1)[:, None]
+    texture = np.exp(CLOUD_DETAIL * bluemarble.detail(q, lod, offset=97.0))  # within clouds: no new wisps
+    cloud = np.clip((cloud_cover(seed, q) - CLOUD_THRESHOLD) * CLOUD_GAIN * texture, 0, 1)[:, None]
     return (1 - cloud) * surface + cloud * EARTH_CLOUD, water, cloud
 
 
