@@ -14,7 +14,6 @@ import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from posenet.errors import PosenetError
-from posenet.export import export_onnx, onnx_session, run_onnx
 from posenet.models import ModelConfig, PoseNet, create_model
 
 
@@ -101,6 +100,8 @@ def onnx_latency_ms(
 ) -> float:
     """`measure_latency_ms` of the model exported to ONNX and run by onnxruntime on the CPU, with torch's
     intra-op thread count."""
+    from posenet.export import export_onnx, onnx_session, run_onnx  # onnxscript's import costs ~0.6 s
+
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "model.onnx"
         export_onnx(model, path)

@@ -30,7 +30,6 @@ from posenet.evaluate import (
     summary_rows,
 )
 from posenet.evaluate import by_factor as run_by_factor
-from posenet.export import OPSET, export_onnx, max_difference, onnx_session
 from posenet.models import VARIANTS
 from posenet.ransac import PNP_LABELS, PNP_METHODS
 from posenet.train import train as run_train
@@ -303,6 +302,8 @@ def bench(
 def export_cmd(ckpt: Path, onnx_path: Path) -> None:
     """Export a pose network to ONNX (opset 18, dynamic batch): inputs roi_img, roi_coord2d; outputs mask,
     xyz, region, rot6d, site. Checks onnxruntime's outputs against torch's on a random batch of 2."""
+    from posenet.export import OPSET, export_onnx, max_difference, onnx_session  # ~0.6 s: only here
+
     model, _ = load_model(ckpt, torch.device("cpu"))
     export_onnx(model, onnx_path)
     diff = max_difference(model, onnx_session(onnx_path))

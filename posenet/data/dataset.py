@@ -23,7 +23,6 @@ from posenet.data.crop import Roi, box_in_roi, crop, roi_coord2d, roi_from_box
 from posenet.data.io import read_bgr, read_mask, read_xyz
 from posenet.data.layout import Instance, scan_split
 from posenet.data.object_model import ObjectModel, load_object_model
-from posenet.data.photometric import photometric
 from posenet.errors import PosenetError
 from posenet.geometry import site_encode
 from posenet.models import ModelConfig
@@ -134,6 +133,8 @@ class PoseDataset(Dataset):
         if name == "spnv2" or rng.random() < self.cfg.color_prob:
             if name == "paper":
                 return augment.brightness_contrast(img, rng, self.cfg.brightness, self.cfg.contrast)
+            from posenet.data.photometric import photometric  # albumentations: imported when asked for
+
             return photometric(name, img, box_in_roi(inst.bbox_obj, roi), rng)
         return img
 
