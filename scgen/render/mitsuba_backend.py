@@ -3,6 +3,12 @@
 RGB comes from Mitsuba's path tracer; the geometric passes (depth, instance ids, normals,
 the target-alone depth, shadow rays) come from exact ray casts through pixel centres, so no
 filtered or jittered sample ever blends two surfaces at an edge.
+
+Per sample one scene holds the target (one mesh per material class) and the props, for the path tracer
+and the ray casts alike. Dr.Jit traces every live shape, BSDF and light into each kernel and compiles a
+kernel anew for each new set of them or of the constants they bake in (LLVM: about 0.3 s at any image
+size), so that set is kept steady from sample to sample: see _steady_shapes, _steady_light_bounds and
+mitsuba_materials.TargetFinishes.
 """
 
 from __future__ import annotations
@@ -12,6 +18,7 @@ from dataclasses import replace
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+from trimesh.transformations import transform_points
 
 from scgen.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.model import TargetModel
@@ -22,7 +29,6 @@ from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_llvm import mitsuba_setup
 from scgen.render.mitsuba_materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
 from scgen.render.props import prop_mesh
-from scgen.scenes.finish import finished
 from scgen.scenes.spec import SceneSpec
 
 QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
@@ -36,18 +42,24 @@ def select_variant() -> str:
     return mi.variant()
 
 
-def _mesh(name: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, bsdf: mi.BSDF) -> mi.Mesh:
-    """A Mitsuba mesh of unwelded triangles (3 vertices per face, as box_uv lays them out)."""
+def _mesh(name: str, corners: np.ndarray, uv: np.ndarray, bsdf: mi.BSDF) -> mi.Mesh:
+    """A Mitsuba mesh of unwelded triangles: `corners` (3F x 3) and `uv` (3F x 2) hold three per face, in
+    face order, as box_uv lays them out."""
     props = mi.Properties()
     props["bsdf"] = bsdf
-    m = mi.Mesh(name, 3 * len(faces), len(faces), props=props, has_vertex_normals=False,
-                has_vertex_texcoords=True)  # fmt: skip
+    n = len(corners)
+    m = mi.Mesh(name, n, n // 3, props=props, has_vertex_normals=False, has_vertex_texcoords=True)
     params = mi.traverse(m)
-    params["vertex_positions"] = dr.ravel(mi.TensorXf(vertices[faces].reshape(-1, 3).astype(np.float32)))
-    params["faces"] = dr.ravel(mi.TensorXu(np.arange(3 * len(faces), dtype=np.uint32)))
+    params["vertex_positions"] = dr.ravel(mi.TensorXf(corners.astype(np.float32)))
+    params["faces"] = dr.ravel(mi.TensorXu(np.arange(n, dtype=np.uint32)))
     params["vertex_texcoords"] = dr.ravel(mi.TensorXf(uv.astype(np.float32)))
     params.update()
     return m
+
+
+def _scene_of(shapes: list[mi.Mesh]) -> mi.Scene:
+    """A scene of these shapes alone, for ray casts."""
+    return mi.load_dict({"type": "scene", **{f"s{k:03d}": s for k, s in enumerate(shapes)}})
 
 
 class MitsubaBackend:
@@ -63,31 +75,38 @@ class MitsubaBackend:
         check_quality(quality)
         self.spp = QUALITY_SPP[quality]
         self.bsdfs = build_bsdfs()
+        self._classes: dict[str, list[int]] = {}  # material class -> its parts, one target mesh each
+        for k, (material, _) in enumerate(model.parts):
+            self._classes.setdefault(material, []).append(k)
         self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
         self._finishes = TargetFinishes()
+        self._reach = 1.01 * float(np.linalg.norm(model.mesh.vertices, axis=1).max())  # target's radius
+        self._most_props = 0  # the most props a sample had so far
+        self._spares: list[mi.Mesh] = []  # see _steady_shapes
 
     def close(self) -> None:
         pass
 
-    def _shapes(self, spec: SceneSpec) -> tuple[list[mi.Mesh], list[mi.Mesh]]:
-        """Mitsuba meshes of the target parts and of the props, in the camera frame."""
+    def _shapes(self, spec: SceneSpec, shaded: bool = True) -> tuple[list[mi.Mesh], list[mi.Mesh]]:
+        """Mitsuba meshes in the camera frame: the target's, one per material class (its parts, in model
+        order), and one per prop. `shaded`: with the sample's finish (else the nominal BSDFs)."""
         T = spec.target.matrix
-        target, props = [], []
-        for k, (material, mesh) in enumerate(self.model.parts):
-            m = mesh.copy()
-            m.apply_transform(T)
-            drawn = spec.finish[material]["material"] if material in spec.finish else material
-            bsdf = self.bsdfs[material]
-            if material in spec.finish:  # the sample's finish
-                bsdf = self._finishes.bsdf(material, drawn, finished(spec.finish, material))
-            target.append(_mesh(f"target{k}", np.asarray(m.vertices), np.asarray(m.faces),
-                                self._part_uv(k, drawn), bsdf))  # fmt: skip
+        finish = {cls: f for cls, f in spec.finish.items() if cls in self._classes} if shaded else {}
+        bsdfs = {**self.bsdfs, **self._finishes.bsdfs(finish)}
+        target = []
+        for cls, parts in self._classes.items():
+            drawn = spec.finish[cls]["material"] if cls in spec.finish else cls
+            corners = [transform_points(mesh.vertices, T)[mesh.faces].reshape(-1, 3)
+                       for mesh in (self.model.parts[k][1] for k in parts)]  # fmt: skip
+            uv = np.concatenate([self._part_uv(k, drawn) for k in parts])
+            target.append(_mesh(f"target_{cls}", np.concatenate(corners), uv, bsdfs[cls]))
+        props = []
         for k, prop in enumerate(spec.props):
             m = prop_mesh(prop)
             local = (np.asarray(m.vertices) - prop.pose.t_vec) @ prop.pose.R_mat  # UVs stick to the prop
             uv = box_uv(local, np.asarray(m.faces), texture_scale(prop.material, max(prop.size)))
-            props.append(_mesh(f"prop{k}", np.asarray(m.vertices), np.asarray(m.faces), uv,
-                               self.bsdfs[prop.material]))  # fmt: skip
+            corners = np.asarray(m.vertices)[np.asarray(m.faces)].reshape(-1, 3)
+            props.append(_mesh(f"prop{k}", corners, uv, self.bsdfs[prop.material]))
         return target, props
 
     def _part_uv(self, k: int, material: str) -> np.ndarray:
@@ -99,42 +118,60 @@ class MitsubaBackend:
         return self._uv[k, material]
 
     def render(self, spec: SceneSpec) -> Buffers:
+        self._steady_shapes(len(spec.props))
         target, props = self._shapes(spec)
-        buffers = self._passes(spec, target, props)
-        buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, target + props), buffers.instance)
+        scene = self._scene(spec, target + props)
+        buffers = self._passes(spec, scene, target, props)
+        buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, scene), buffers.instance)
         return buffers
 
     def render_geometry(self, spec: SceneSpec) -> Buffers:
         """Only the exact geometric passes (RGB left black): labels at a fraction of the cost."""
-        return self._passes(spec, *self._shapes(spec))
+        self._steady_shapes(len(spec.props))
+        target, props = self._shapes(spec, shaded=False)
+        return self._passes(spec, _scene_of(target + props), target, props)
 
-    def _passes(self, spec: SceneSpec, target: list[mi.Mesh], props: list[mi.Mesh]) -> Buffers:
-        geo_target = self._geometry_scene(target)
-        geo_all = self._geometry_scene(target + props)
-        geo_props = self._geometry_scene(props) if props else None
+    def _steady_shapes(self, n_props: int) -> None:
+        """Keep the count of live shapes at the target's plus the most props seen, with spare meshes in no
+        scene: Dr.Jit lays out every live shape's data in each kernel that calls into shapes (ray casts,
+        the path tracer), so each new count of props compiled new kernels."""
+        self._most_props = max(self._most_props, n_props)
+        del self._spares[self._most_props - n_props :]
+        while len(self._spares) < self._most_props - n_props:
+            self._spares.append(_mesh("spare", np.zeros((3, 3)), np.zeros((3, 2)), self.bsdfs["white_paint"]))
 
+    def _passes(
+        self, spec: SceneSpec, scene: mi.Scene, target: list[mi.Mesh], props: list[mi.Mesh]
+    ) -> Buffers:
+        """The exact geometric passes of `scene` (holding `target` and `props`): one ray per pixel centre.
+
+        The target-alone depth equals the depth wherever the target is hit first; only the rays that hit
+        a prop no farther than the target's bounding sphere reaches are cast again, through the target alone.
+        """
         W, H = spec.camera.width, spec.camera.height
         rays_cam = spec.camera.pixel_directions().reshape(-1, 3)
-        t_all, idx_all, normal = cast_rays(geo_all, target + props, rays_cam)
-        t_tgt, _, _ = cast_rays(geo_target, [], rays_cam)
+        t_all, idx_all, normal = cast_rays(scene, target + props, rays_cam)
+        n_target = len(target)
+        hit = idx_all >= 0
+        on_target = hit & (idx_all < n_target)
+        on_prop = hit & ~on_target
+        t_tgt = np.where(on_target, t_all, np.inf)
+        behind = on_prop & self._may_reach_target(spec, rays_cam, t_all)
+        if behind.any():
+            t_tgt[behind] = cast_rays(_scene_of(target), [], rays_cam[behind])[0]
         z_scale = rays_cam[:, 2]
         depth = np.where(np.isfinite(t_all), t_all * z_scale, 0.0).reshape(H, W).astype(np.float32)
         target_depth = np.where(np.isfinite(t_tgt), t_tgt * z_scale, 0.0).reshape(H, W).astype(np.float32)
-        n_target = len(target)
         instance = np.full(H * W, BACKGROUND_ID, np.int32)
-        hit = idx_all >= 0
-        instance[hit & (idx_all < n_target)] = TARGET_ID
-        is_prop = hit & (idx_all >= n_target)
-        instance[is_prop] = 2 + (idx_all[is_prop] - n_target)
+        instance[on_target] = TARGET_ID
+        instance[on_prop] = 2 + (idx_all[on_prop] - n_target)
         normal = np.where((np.sum(normal * rays_cam, axis=1) > 0)[:, None], -normal, normal)
 
         sun = np.asarray(spec.sun.direction, np.float64)
         sun_blocked = np.zeros(H * W, bool)
-        if geo_props is not None:
-            pts = rays_cam * np.where(hit, t_all, 0.0)[:, None]
-            on_target = instance == TARGET_ID
-            origins = pts[on_target] + 1e-4 * normal[on_target]
-            sun_blocked[on_target] = _occluded(geo_props, origins, sun)
+        if props and on_target.any():
+            origins = rays_cam[on_target] * t_all[on_target, None] + 1e-4 * normal[on_target]
+            sun_blocked[on_target] = _occluded(_scene_of(props), origins, sun)
 
         return Buffers(
             rgb=np.zeros((H, W, 3), np.uint8),
@@ -145,17 +182,18 @@ class MitsubaBackend:
             sun_blocked=sun_blocked.reshape(H, W),
         )
 
-    @staticmethod
-    def _geometry_scene(shapes: list[mi.Mesh]) -> mi.Scene:
-        d = {"type": "scene"}
-        for k, s in enumerate(shapes):
-            d[f"s{k:03d}"] = s
-        return mi.load_dict(d)
+    def _may_reach_target(self, spec: SceneSpec, rays: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Whether each ray (unit directions from the camera) meets the target's bounding sphere (about
+        its origin, 1 % wider) anywhere beyond distance t."""
+        centre = np.asarray(spec.target.t_vec, np.float64)
+        along = rays @ centre
+        gap2 = centre @ centre - along**2  # squared distance from the sphere's centre to the ray's line
+        return (gap2 <= self._reach**2) & (t <= along + np.sqrt(np.maximum(self._reach**2 - gap2, 0.0)))
 
-    def _shade(self, spec: SceneSpec, shapes: list[mi.Mesh]) -> np.ndarray:
-        """The linear composite over the background, on the render camera (scgen.render.camera.lens)."""
-        spec = replace(spec, camera=render_camera(spec.camera))
-        cam = spec.camera
+    def _scene(self, spec: SceneSpec, shapes: list[mi.Mesh]) -> mi.Scene:
+        """The path tracer's scene: `shapes`, the sun (and earthshine), the render camera
+        (scgen.render.camera.lens) and its film."""
+        cam = render_camera(spec.camera)
         K = cam.K_mat
         d: dict = {
             "type": "scene",
@@ -195,9 +233,28 @@ class MitsubaBackend:
         for k, s in enumerate(shapes):
             d[f"s{k:03d}"] = s
         scene = mi.load_dict(d)
+        _steady_light_bounds(scene)
+        return scene
+
+    def _shade(self, spec: SceneSpec, scene: mi.Scene) -> np.ndarray:
+        """The linear composite over the background, on the render camera (scgen.render.camera.lens)."""
         img = np.asarray(mi.render(scene, seed=render_seed(spec)), dtype=np.float32)
         fg, alpha = img[..., :3], img[..., 3:4]
-        return fg + (1.0 - np.clip(alpha, 0, 1)) * background_image(spec)
+        background = background_image(replace(spec, camera=render_camera(spec.camera)))
+        return fg + (1.0 - np.clip(alpha, 0, 1)) * background
+
+
+def _steady_light_bounds(scene: mi.Scene) -> None:
+    """Give the directional lights a bounding sphere about the camera whose radius is the power of two that
+    encloses the scene: they keep their scene's sphere as constants of the render kernel, so the scene's
+    own sphere compiled a new kernel for every sample."""
+    bbox = scene.bbox()
+    extent = float(np.abs(np.concatenate([np.asarray(bbox.min), np.asarray(bbox.max)])).max())
+    half = 2.0 ** np.ceil(np.log2(max(extent, CLIP_START_M)))
+    cube = {"type": "cube", "to_world": mi.ScalarTransform4f().scale([half] * 3)}
+    bounds = mi.load_dict({"type": "scene", "cube": cube})
+    for emitter in scene.emitters():
+        emitter.set_scene(bounds)
 
 
 def cast_rays(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

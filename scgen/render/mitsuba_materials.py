@@ -16,6 +16,7 @@ import mitsuba as mi
 import numpy as np
 
 from scgen.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
+from scgen.scenes.finish import finished
 
 CRINKLE_TILES_PER_SIZE = 2.0  # a tile spans half the object: no visible repetition on a face
 TEXTURE_SEED = 2024  # the detail textures are fixed assets, identical for every sample
@@ -44,11 +45,21 @@ def crinkle_normal_map(slope: float = CRINKLE_SLOPE) -> np.ndarray:
     """A tileable tangent-space normal map (512 x 512 x 3 in [0, 1]) of crumpled foil; `slope` scales
     the height gradient (the crinkle's strength)."""
     gx, gy = _crinkle_gradient()
-    nx, ny = -slope * gx, -slope * gy
-    length = np.sqrt(nx * nx + ny * ny + 1.0)  # as np.linalg.norm sums it: the nominal map's bytes
-    return np.stack([0.5 * (nx / length) + 0.5, 0.5 * (ny / length) + 0.5, 0.5 / length + 0.5], -1).astype(
-        np.float32
-    )
+    nx, ny = gx * -slope, gy * -slope
+    length = nx * nx  # then + ny * ny + 1, as np.linalg.norm sums it: the nominal map's bytes
+    length += ny * ny
+    length += 1.0
+    np.sqrt(length, out=length)
+    out = np.empty((*gx.shape, 3), np.float32)  # each channel 0.5 * n + 0.5, in place (a sample makes two)
+    for k, n in enumerate((nx, ny)):
+        n /= length
+        n *= 0.5
+        n += 0.5
+        out[..., k] = n
+    np.divide(0.5, length, out=length)
+    length += 0.5
+    out[..., 2] = length
+    return out
 
 
 def cell_texture(
@@ -91,30 +102,48 @@ def finish_bsdf(m: Material) -> mi.BSDF:
 
 
 class TargetFinishes:
-    """The target's BSDFs under per-sample finishes: one per (part class, class drawn), built on first
-    use, then set to each sample's values in place (mi.traverse) instead of being built again."""
+    """The target's BSDFs under per-sample finishes, kept per class drawn: each sample takes one of that
+    class's BSDFs per part class drawing it, sets it to the sample's values in place (mi.traverse), and
+    builds one only when all are taken (two part classes drawing one class).
+
+    Dr.Jit traces every live BSDF into each render kernel, used by the scene or not (about 1 ms each), and
+    compiles a new kernel whenever the set of live BSDFs changes. So the set stops changing after the
+    first samples, and stays small: one BSDF per (part class, class drawn) would be 36.
+    """
 
     def __init__(self) -> None:
-        self._bsdfs: dict[tuple[str, str], mi.BSDF] = {}
+        self._pools: dict[str, list[mi.BSDF]] = {}  # class drawn -> its BSDFs
 
-    def bsdf(self, part_class: str, drawn: str, m: Material) -> mi.BSDF:
-        """The BSDF of `m` (a finish of class `drawn`) for the parts of class `part_class`."""
-        key = (part_class, drawn)
-        if key not in self._bsdfs:
-            self._bsdfs[key] = finish_bsdf(m)
-            return self._bsdfs[key]
-        params = mi.traverse(self._bsdfs[key])
-        inner = "nested_bsdf." if m.detail == "crinkle" else ""
-        if m.detail == "cells":
-            params["base_color.data"] = mi.TensorXf(cell_texture(m.base))
-        else:
-            params[inner + "base_color.value"] = mi.Color3f(*m.base)
-        params[inner + "roughness.value"] = m.roughness
+    def bsdfs(self, finish: dict[str, dict]) -> dict[str, mi.BSDF]:
+        """The BSDF of every part class under a sample's finish (scgen.scenes.finish)."""
+        taken: dict[str, int] = {}
+        out = {}
+        for part_class in sorted(finish):
+            drawn, m = finish[part_class]["material"], finished(finish, part_class)
+            pool = self._pools.setdefault(drawn, [])
+            k = taken[drawn] = taken.get(drawn, -1) + 1
+            if k == len(pool):
+                pool.append(finish_bsdf(m))
+            else:
+                _set_finish(pool[k], m)
+            out[part_class] = pool[k]
+        return out
+
+
+def _set_finish(bsdf: mi.BSDF, m: Material) -> None:
+    """Set a BSDF built by finish_bsdf for `m`'s class to `m`'s values: it renders what a new one would."""
+    params = mi.traverse(bsdf)
+    inner = "nested_bsdf." if m.detail == "crinkle" else ""
+    if m.detail == "cells":
+        params["base_color.data"] = mi.TensorXf(cell_texture(m.base))
+    else:
+        params[inner + "base_color.value"] = mi.Color3f(*m.base)
+    params[inner + "roughness.value"] = m.roughness
+    if m.metallic:  # 0 for every draw of its class; setting it would mark the BSDF metallic for good
         params[inner + "metallic.value"] = m.metallic
-        if m.detail == "crinkle":
-            params["normalmap.data"] = mi.TensorXf(crinkle_normal_map(CRINKLE_SLOPE * m.crinkle))
-        params.update()
-        return self._bsdfs[key]
+    if m.detail == "crinkle":
+        params["normalmap.data"] = mi.TensorXf(crinkle_normal_map(CRINKLE_SLOPE * m.crinkle))
+    params.update()
 
 
 def texture_scale(material: str, size: float) -> float:
