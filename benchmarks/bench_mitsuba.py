@@ -1,5 +1,10 @@
-"""Mitsuba backend throughput, time outside the renderer, bytes per sample by file kind, and the
-float16-vs-float32 xyz storage error. Usage: python benchmarks/bench_mitsuba.py [--n 30] [--out DIR]"""
+"""Mitsuba backend: the time per sample at two image sizes side by side, so the fixed part shows, with the
+kernels each sample launches and compiles; then, at 640x480, throughput, time outside the renderer, bytes
+per sample by file kind and the float16-vs-float32 xyz storage error.
+
+Each size renders in a fresh worker process, as `scgen render` runs it (scgen.parent_watch.spawn_pool).
+Usage: python benchmarks/bench_mitsuba.py [--n 30] [--sizes 64x48,320x240] [--full-n 30] [--out DIR]
+"""
 
 from __future__ import annotations
 
@@ -17,6 +22,7 @@ from scgen.dataset import Layout
 from scgen.factors import spec_key
 from scgen.generator import Generator
 from scgen.model import load_target
+from scgen.parent_watch import spawn_pool
 from scgen.render.base import create_backend
 from scgen.runner import write_static_files
 from scgen.scenes import load_config
@@ -25,17 +31,69 @@ from scgen.validate import reprojection_error
 from scgen.writer import WriteOptions, finalize, write_sample
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--n", type=int, default=30)
-    ap.add_argument("--quality", default="default")
-    ap.add_argument("--out", type=Path, default=None)
-    args = ap.parse_args()
-    out = args.out or Path(tempfile.mkdtemp()) / "bench"
+def time_size(size: tuple[int, int], n: int, quality: str, seed: int) -> dict:
+    """In a worker: samples 1..n of `seed` at `size` after sample 0 (a warm-up); per sample the seconds
+    of the render and of the annotation, CPU seconds, kernel launches and kernels compiled."""
+    import drjit as dr
+
+    model = load_target()
+    backend = create_backend("mitsuba", model, quality=quality)
+    generator = Generator(model, load_config(resolution=size), seed)
+    backend.render(generator.scene(0))
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()
+    out: dict[str, list[float]] = defaultdict(list)
+    for i in range(1, n + 1):
+        spec = generator.scene(i)
+        t0, c0 = time.perf_counter(), time.process_time()
+        buffers = backend.render(spec)
+        t1 = time.perf_counter()
+        annotate(spec, buffers)
+        out["render"].append(t1 - t0)
+        out["annotate"].append(time.perf_counter() - t1)
+        out["cpu"].append(time.process_time() - c0)
+        history = dr.kernel_history()
+        out["launches"].append(len(history))
+        out["compiled"].append(sum(1 for k in history if k.get("cache_hit") == 0))
+    return {"variant": backend.variant, "spp": backend.spp, **out}
+
+
+def side_by_side(sizes: list[tuple[int, int]], n: int, quality: str, seed: int) -> None:
+    """The per-sample figures of each size, one column each, and the fixed part of a straight-line fit."""
+    results = []
+    for size in sizes:
+        with spawn_pool(1) as pool:
+            results.append(pool.submit(time_size, size, n, quality, seed).result())
+    r0 = results[0]
+    print(f"Mitsuba ({r0['variant']}, {quality}, {r0['spp']} spp), seed {seed}: samples 1-{n} after a")
+    print("warm-up, each size in a fresh worker process")
+    print(f"  {'per sample':<30s}" + "".join(f"{f'{w}x{h}':>12s}" for w, h in sizes))
+    rows = [
+        ("render, median ms", lambda r: 1000 * np.median(r["render"])),
+        ("render, mean ms", lambda r: 1000 * np.mean(r["render"])),
+        ("render + annotate, median ms", lambda r: 1000 * np.median(np.add(r["render"], r["annotate"]))),
+        ("CPU ms (all threads), median", lambda r: 1000 * np.median(r["cpu"])),
+        ("kernel launches, median", lambda r: np.median(r["launches"])),
+        ("kernels compiled, mean", lambda r: np.mean(r["compiled"])),
+    ]
+    for label, value in rows:
+        print(f"  {label:<30s}" + "".join(f"{value(r):12.1f}" for r in results))
+    if len(sizes) == 2:
+        pixels = [w * h for w, h in sizes]
+        t = [np.median(r["render"]) for r in results]
+        per_px = (t[1] - t[0]) / (pixels[1] - pixels[0])
+        fixed = t[0] - per_px * pixels[0]
+        print(f"  straight line through the medians: {1000 * fixed:.1f} ms fixed + {1e6 * per_px:.2f} ms per")
+        print(f"  1000 pixels ({100 * fixed / t[0]:.0f} % of a {sizes[0][0]}x{sizes[0][1]} render is fixed)")
+
+
+def full_size(n: int, quality: str, out: Path) -> None:
+    """640x480 samples rendered, annotated and written as `scgen render` does: throughput, the share of
+    time outside the renderer, bytes per sample by file kind and the xyz storage error."""
     model, cfg = load_target(), load_config()
-    backend = create_backend("mitsuba", model, quality=args.quality)
+    backend = create_backend("mitsuba", model, quality=quality)
     generator = Generator(model, cfg, 0)
-    specs = [generator.scene(i) for i in range(args.n)]
+    specs = [generator.scene(i) for i in range(n)]
     splits = plan_splits([spec_key(s) for s in specs], (0.7, 0.1, 0.2), 0)
     layout = Layout(out)
     write_static_files(layout, generator)
@@ -56,13 +114,13 @@ def main() -> None:
         for dtype in ("float16", "float32"):
             C = ann.xyz[vs, us].astype(dtype).astype(np.float64)
             errors[f"{dtype} reproj px"].append(
-                reprojection_error(C, us, vs, spec.camera.K_mat, spec.target.R_mat, spec.target.t_vec)
+                reprojection_error(C, us, vs, spec.camera, spec.target.R_mat, spec.target.t_vec)
             )
             errors[f"{dtype} surface mm"].append(surface.on_surface(C)[1] * 1000)
     finalize(layout)
     total = t_render + t_other
-    print(f"Mitsuba ({backend.variant}, {args.quality}, 640x480), {args.n} samples")
-    print(f"  images/s: {args.n / total:.2f}   render {t_render / args.n:.3f} s/img")
+    print(f"Mitsuba ({backend.variant}, {quality}, 640x480), {n} samples")
+    print(f"  images/s: {n / total:.2f}   render {t_render / n:.3f} s/img")
     print(f"  time outside the renderer (annotation + writing): {100 * t_other / total:.1f} %")
     sizes: dict[str, int] = defaultdict(int)
     static = 0  # written once per dataset: models, models_eval, camera, config, test targets
@@ -77,13 +135,28 @@ def main() -> None:
     print(f"  files written once per dataset: {static / 2**20:.1f} MB")
     print("  bytes per sample by file kind:")
     for kind, b in sorted(sizes.items()):
-        print(f"    {kind:<11s} {b / args.n / 1024:8.1f} KB")
-    per = sum(sizes.values()) / args.n
+        print(f"    {kind:<11s} {b / n / 1024:8.1f} KB")
+    per = sum(sizes.values()) / n
     print(f"    {'total':<11s} {per / 1024:8.1f} KB  -> 50k samples: {per * 50000 / 1e9:.1f} GB")
     print("  xyz storage error (all visible pixels): p99 / max")
     for name, vals in errors.items():
         v = np.concatenate(vals)
         print(f"    {name:<18s} {np.percentile(v, 99):.4f} / {v.max():.4f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--n", type=int, default=30, help="samples per size, side by side")
+    ap.add_argument("--sizes", default="64x48,320x240")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--full-n", type=int, default=30, help="samples at 640x480 (0: skip)")
+    ap.add_argument("--quality", default="default")
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args()
+    sizes = [(int(w), int(h)) for w, h in (s.split("x") for s in args.sizes.split(","))]
+    side_by_side(sizes, args.n, args.quality, args.seed)
+    if args.full_n:
+        full_size(args.full_n, args.quality, args.out or Path(tempfile.mkdtemp()) / "bench")
 
 
 if __name__ == "__main__":
