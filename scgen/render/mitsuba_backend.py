@@ -32,6 +32,7 @@ from scgen.render.props import prop_mesh
 from scgen.scenes.spec import SceneSpec
 
 QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
+GUARD_M = 1e4  # half the span of the guard triangle (see MitsubaBackend.__init__)
 
 
 def select_variant() -> str:
@@ -57,11 +58,6 @@ def _mesh(name: str, corners: np.ndarray, uv: np.ndarray, bsdf: mi.BSDF) -> mi.M
     return m
 
 
-def _scene_of(shapes: list[mi.Mesh]) -> mi.Scene:
-    """A scene of these shapes alone, for ray casts."""
-    return mi.load_dict({"type": "scene", **{f"s{k:03d}": s for k, s in enumerate(shapes)}})
-
-
 class MitsubaBackend:
     """Renders SceneSpecs with Mitsuba; one instance per worker process."""
 
@@ -83,6 +79,10 @@ class MitsubaBackend:
         self._reach = 1.01 * float(np.linalg.norm(model.mesh.vertices, axis=1).max())  # target's radius
         self._most_props = 0  # the most props a sample had so far
         self._spares: list[mi.Mesh] = []  # see _steady_shapes
+        # one triangle of no area, never hit, whose box spans 20 km: beside it Embree finds no spatial
+        # split worth making, and builds the target's BVH in 8 ms instead of 19 (labels are the same)
+        far = GUARD_M * np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [1.0, 1.0, -1.0]])
+        self._guard = _mesh("guard", far, np.zeros((3, 2)), self.bsdfs["white_paint"])
 
     def close(self) -> None:
         pass
@@ -129,7 +129,7 @@ class MitsubaBackend:
         """Only the exact geometric passes (RGB left black): labels at a fraction of the cost."""
         self._steady_shapes(len(spec.props))
         target, props = self._shapes(spec, shaded=False)
-        return self._passes(spec, _scene_of(target + props), target, props)
+        return self._passes(spec, self._scene_of(target + props), target, props)
 
     def _steady_shapes(self, n_props: int) -> None:
         """Keep the count of live shapes at the target's plus the most props seen, with spare meshes in no
@@ -158,7 +158,7 @@ class MitsubaBackend:
         t_tgt = np.where(on_target, t_all, np.inf)
         behind = on_prop & self._may_reach_target(spec, rays_cam, t_all)
         if behind.any():
-            t_tgt[behind] = cast_rays(_scene_of(target), [], rays_cam[behind])[0]
+            t_tgt[behind] = cast_rays(self._scene_of(target), [], rays_cam[behind])[0]
         z_scale = rays_cam[:, 2]
         depth = np.where(np.isfinite(t_all), t_all * z_scale, 0.0).reshape(H, W).astype(np.float32)
         target_depth = np.where(np.isfinite(t_tgt), t_tgt * z_scale, 0.0).reshape(H, W).astype(np.float32)
@@ -171,7 +171,7 @@ class MitsubaBackend:
         sun_blocked = np.zeros(H * W, bool)
         if props and on_target.any():
             origins = rays_cam[on_target] * t_all[on_target, None] + 1e-4 * normal[on_target]
-            sun_blocked[on_target] = _occluded(_scene_of(props), origins, sun)
+            sun_blocked[on_target] = _occluded(self._scene_of(props), origins, sun)
 
         return Buffers(
             rgb=np.zeros((H, W, 3), np.uint8),
@@ -181,6 +181,11 @@ class MitsubaBackend:
             normal=normal.reshape(H, W, 3).astype(np.float32),
             sun_blocked=sun_blocked.reshape(H, W),
         )
+
+    def _scene_of(self, shapes: list[mi.Mesh]) -> mi.Scene:
+        """A scene of these shapes alone (and the guard), for ray casts."""
+        shapes = [*shapes, self._guard]
+        return mi.load_dict({"type": "scene", **{f"s{k:03d}": s for k, s in enumerate(shapes)}})
 
     def _may_reach_target(self, spec: SceneSpec, rays: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Whether each ray (unit directions from the camera) meets the target's bounding sphere (about
@@ -230,10 +235,10 @@ class MitsubaBackend:
                 "direction": [-float(x) for x in direction],
                 "irradiance": {"type": "rgb", "value": [c * irradiance for c in EARTHSHINE_COLOUR]},
             }
-        for k, s in enumerate(shapes):
+        for k, s in enumerate([*shapes, self._guard]):
             d[f"s{k:03d}"] = s
         scene = mi.load_dict(d)
-        _steady_light_bounds(scene)
+        _steady_light_bounds(scene, shapes)
         return scene
 
     def _shade(self, spec: SceneSpec, scene: mi.Scene) -> np.ndarray:
@@ -244,12 +249,12 @@ class MitsubaBackend:
         return fg + (1.0 - np.clip(alpha, 0, 1)) * background
 
 
-def _steady_light_bounds(scene: mi.Scene) -> None:
+def _steady_light_bounds(scene: mi.Scene, shapes: list[mi.Mesh]) -> None:
     """Give the directional lights a bounding sphere about the camera whose radius is the power of two that
     encloses the scene: they keep their scene's sphere as constants of the render kernel, so the scene's
     own sphere compiled a new kernel for every sample."""
-    bbox = scene.bbox()
-    extent = float(np.abs(np.concatenate([np.asarray(bbox.min), np.asarray(bbox.max)])).max())
+    corners = [np.asarray(c) for s in shapes for c in (s.bbox().min, s.bbox().max)]
+    extent = float(np.abs(corners).max())
     half = 2.0 ** np.ceil(np.log2(max(extent, CLIP_START_M)))
     cube = {"type": "cube", "to_world": mi.ScalarTransform4f().scale([half] * 3)}
     bounds = mi.load_dict({"type": "scene", "cube": cube})
