@@ -76,6 +76,14 @@ def worker_init(_: int) -> None:
     cv2.setNumThreads(1)
 
 
+def before_loader_fork() -> None:
+    """Make this process safe to fork loader processes from: OpenCV's thread pool does not survive a fork.
+    Once this process has used the pool (cv2.GaussianBlur, say, in an augmentation chain run here), a
+    forked loader process hangs for ever in worker_init's cv2.setNumThreads. With one OpenCV thread here
+    there is no pool to inherit; the training process itself runs no OpenCV while its loaders read."""
+    cv2.setNumThreads(1)
+
+
 def make_optimizer(
     model: torch.nn.Module, o: OptimConfig, total_iters: int
 ) -> tuple[torch.optim.Optimizer, LambdaLR]:
@@ -300,6 +308,8 @@ def _refuse(out: Path, batch_size: int, resume: bool, world: int) -> None:
 
 def _loader(dataset: PoseDataset, sampler: EpochSampler, workers: int, device: torch.device) -> DataLoader:
     """Batches in the sampler's order; `workers` persistent single-threaded processes."""
+    if workers > 0:
+        before_loader_fork()
     return DataLoader(
         dataset,
         batch_size=sampler.batch_size,

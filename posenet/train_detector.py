@@ -28,7 +28,16 @@ from posenet.detector import (
     visible_boxes,
 )
 from posenet.errors import PosenetError
-from posenet.train import LAST, RunLog, make_optimizer, memory_format, pin_cpu_threads, stop_step, worker_init
+from posenet.train import (
+    LAST,
+    RunLog,
+    before_loader_fork,
+    make_optimizer,
+    memory_format,
+    pin_cpu_threads,
+    stop_step,
+    worker_init,
+)
 from scgen.atomic import atomic_write_text
 
 BEST = "best.pt"
@@ -105,6 +114,8 @@ def _epoch(
     dataset.epoch = epoch
     order = torch.randperm(len(dataset), generator=torch.Generator().manual_seed(o.seed * 100003 + epoch))
     batches = order[: len(order) // o.batch_size * o.batch_size].view(-1, o.batch_size)[skip:]
+    if cfg.workers > 0:
+        before_loader_fork()
     loader = DataLoader(
         dataset, batch_sampler=batches.tolist(), num_workers=cfg.workers, collate_fn=collate,
         worker_init_fn=worker_init,
