@@ -19,10 +19,20 @@ optim: {batch_size: 4, epochs: 1}
 """
 N_IMAGES = 24
 RESOLUTION = (320, 240)
+# The images the learning test's thresholds were measured on: an ideal camera, the procedural sky and
+# the CAD finishes (scgen's defaults before its camera, real sky and drawn finishes). Under the new
+# defaults 16 training images no longer generalise to the 8 held-out ones within the test's budget
+# (held-out mask IoU 0.34 vs the majority mask's 0.33, translation ratio 0.77; README, posenet): that is
+# a finding about the data's difficulty, measured separately, not a regression of the learner.
+AS_BEFORE_REALISM = {
+    "background": {"earth_map": "procedural", "stars": "procedural"},
+    "finish": {"mode": "nominal"},
+}
 
 
 def posenet_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """24 samples of seed 0 rendered with Mitsuba at 320x240, read-only for tests.
+    """24 samples of seed 0 rendered with Mitsuba at 320x240 as before scgen's realism (AS_BEFORE_REALISM),
+    read-only for tests.
 
     Cached under the session's base temp dir (rendered to a sibling, then renamed), so every test
     module asking for it shares one rendering.
@@ -31,8 +41,9 @@ def posenet_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     if not out.is_dir():
         tmp = out.with_name("posenet_ds.partial")
         job = RenderJob(
-            out=tmp, n=N_IMAGES, seed=0, backend="mitsuba", quality="draft", resolution=RESOLUTION
-        )
+            out=tmp, n=N_IMAGES, seed=0, backend="mitsuba", quality="draft", resolution=RESOLUTION,
+            camera="ideal", overrides=AS_BEFORE_REALISM,
+        )  # fmt: skip
         run_render(job, progress=False)
         tmp.rename(out)
     return out
