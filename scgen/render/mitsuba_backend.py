@@ -33,6 +33,7 @@ from scgen.scenes.spec import SceneSpec
 
 QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
 GUARD_M = 1e4  # half the span of the guard triangle (see MitsubaBackend.__init__)
+MIN_PROP_SLOTS = 12  # live meshes kept for props from the start (the default config draws at most 9)
 
 
 def select_variant() -> str:
@@ -77,7 +78,7 @@ class MitsubaBackend:
         self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
         self._finishes = TargetFinishes()
         self._reach = 1.01 * float(np.linalg.norm(model.mesh.vertices, axis=1).max())  # target's radius
-        self._most_props = 0  # the most props a sample had so far
+        self._most_props = MIN_PROP_SLOTS  # the most props a sample had so far, at least this
         self._spares: list[mi.Mesh] = []  # see _steady_shapes
         # one triangle of no area, never hit, whose box spans 20 km: beside it Embree finds no spatial
         # split worth making, and builds the target's BVH in 8 ms instead of 19 (labels are the same)
@@ -132,9 +133,10 @@ class MitsubaBackend:
         return self._passes(spec, self._scene_of(target + props), target, props)
 
     def _steady_shapes(self, n_props: int) -> None:
-        """Keep the count of live shapes at the target's plus the most props seen, with spare meshes in no
-        scene: Dr.Jit lays out every live shape's data in each kernel that calls into shapes (ray casts,
-        the path tracer), so each new count of props compiled new kernels."""
+        """Keep the count of live shapes at the target's plus the most props seen (MIN_PROP_SLOTS at
+        least), with spare meshes in no scene: Dr.Jit lays out every live shape's data in each kernel that
+        calls into shapes (ray casts, the path tracer), so each new count of props compiled new kernels.
+        A spare adds about 0.13 ms to a render."""
         self._most_props = max(self._most_props, n_props)
         del self._spares[self._most_props - n_props :]
         while len(self._spares) < self._most_props - n_props:
