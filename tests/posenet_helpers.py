@@ -70,12 +70,14 @@ def occluded_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def tiny_pose_checkpoint(dataset: Path, tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:
-    """`posenet train` with TINY_POSE for 2 steps on `dataset`; the path of its last.pt."""
+def tiny_pose_checkpoint(
+    dataset: Path, tmp_path_factory: pytest.TempPathFactory, name: str, variant: str = "gdrnet"
+) -> Path:
+    """`posenet train` with TINY_POSE (of `variant`) for 2 steps on `dataset`; the path of its last.pt."""
     root = tmp_path_factory.mktemp(name)
     (root / "tiny.yaml").write_text(TINY_POSE)
     args = ["train", "--data", dataset, "--out", root / "run", "--config", root / "tiny.yaml"]
-    args += ["--max-steps", 2]
+    args += ["--max-steps", 2, "--variant", variant]
     res = CliRunner().invoke(posenet_main, [str(a) for a in args])
     assert res.exit_code == 0, res.output
     return root / "run" / "last.pt"
