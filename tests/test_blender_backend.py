@@ -198,3 +198,16 @@ def test_a_sample_does_not_depend_on_what_its_worker_rendered_before(model):
         for name in ("instance", "depth", "target_depth", "normal", "sun_blocked"):
             np.testing.assert_array_equal(getattr(fresh, name), getattr(after, name), err_msg=name)
         assert np.abs(fresh.rgb.astype(int) - after.rgb).max() <= 1
+
+
+def test_every_pinhole_sample_takes_its_labels_from_cycles(model, monkeypatch):
+    """Not only a process's first: render_camera's cache hands later samples an equal camera of an earlier
+    one, not their own, and an identity check sent them to the Mitsuba ray caster."""
+    generator = Generator(model, load_config(resolution=(64, 48)), 0)
+    backend = BlenderBackend(model, quality="draft", threads=1)
+    monkeypatch.setattr(backend, "_ray_caster", lambda: pytest.fail("pinhole labels by Mitsuba ray casts"))
+    try:
+        for i in range(3):
+            backend.render(generator.scene(i))
+    finally:
+        backend.close()

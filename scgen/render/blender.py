@@ -63,7 +63,7 @@ class BlenderBackend:
         shown = replace(spec, camera=render_camera(spec.camera))
         self.scene.update(shown)
         beauty = self.scene.render_beauty()
-        if shown.camera is spec.camera:
+        if shown.camera == spec.camera:  # not `is`: render_camera's cache returns an equal camera of before
             instance, depth = instance_and_depth(beauty)
             aux = self.scene.render_aux(target_alone=props_may_hide_target(spec, self._hull, instance, depth))
             buffers = buffers_from_passes(spec, beauty, aux)
