@@ -189,7 +189,7 @@ def report_text(r: dict[str, Any], summary_table: str, factor_table: str) -> str
         f"{d['workers']} workers: {d['rendered']} rendered in {d['seconds']:.0f} s; splits {d['splits']}",
         f"- training: {t['variant']}, preset {t['preset']}, precision {t['amp']}, batch {t['batch_size']}; "
         f"{t['steps']} steps ({t['epochs']} epochs) at {1000 * t['step_s_probe']:.0f} ms a step (probe), "
-        f"{t['seconds'] / 60:.1f} min for a {t['budget_minutes']:.1f} min budget; "
+        f"{t['seconds'] / 60:.1f} min for a {t['budget_minutes']:g} min budget; "
         f"final loss {t['final_loss']:.4f}",
         f"- evaluation: test split, ground-truth boxes, Patch-PnP; {e['seconds']:.0f} s",
         f"- batch-1 latency of the network: {e['latency_ms']:.2f} ms ({1000 / e['latency_ms']:.1f} FPS)",
