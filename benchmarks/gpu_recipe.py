@@ -41,6 +41,7 @@ from posenet.config import TrainConfig, config_from_dict
 from posenet.data import open_split
 from posenet.errors import PosenetError
 from posenet.evaluate import by_factor, by_factor_table, evaluate, format_table, summary_rows
+from posenet.models.backbone import initial_weights
 from posenet.train import LAST, LOG_FILE, steps_per_epoch, train
 from scgen.atomic import atomic_write_text
 from scgen.errors import ScgenError
@@ -214,6 +215,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     tic = time.perf_counter()
     recipe = recipe_of(args)
     cfg = config_from_dict(recipe.config)  # checked before anything is rendered
+    model_cfg = cfg.model_config()
+    # the backbone's weights before the render: offline, without --pretrained FILE, it stops here in one line
+    initial_weights(model_cfg.backbone, model_cfg.pretrained)
     args.out.mkdir(parents=True, exist_ok=True)
     data = args.out / "data"
     dataset = render(data, recipe, args.seed)
