@@ -6,12 +6,15 @@ the facts here means a Blender and a Mitsuba render of one SceneSpec differ only
 
 from __future__ import annotations
 
+import numpy as np
+
 from scgen.errors import ScgenError
 from scgen.scenes.spec import SceneSpec
 
 QUALITIES = ("draft", "default", "high")
 CLIP_START_M, CLIP_END_M = 1e-3, 1e5  # camera clip range: scenes span millimetres to a few metres
 EARTHSHINE_COLOUR = (0.8, 0.9, 1.0)  # sunlight reflected by the Earth: bluish (per-channel factor)
+LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 luminance weights of linear RGB
 
 
 def check_quality(quality: str) -> None:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from scgen.render import bluemarble
+from scgen.render.conventions import LUMA
 from scgen.render.textures import equirect, periodic_noise
 from scgen.scenes.sky import earth_frame
 
@@ -26,7 +27,6 @@ CLOUD_STREAM = 1  # Blue Marble clouds: np.random.default_rng([background seed, 
 # and a mean cover of about 0.33, so the disc reflects about the Earth's Bond albedo, 0.3
 CLOUD_THRESHOLD, CLOUD_GAIN = 0.0, 0.8
 LAND_DETAIL, CLOUD_DETAIL = 0.35, 0.4  # contrast of the sub-map detail (log albedo, log cloud cover)
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 POLE_TO_EQUATOR = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # a turn about y
 DISC_POINTS = 4096  # surface points averaged by disc_albedo
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from scgen.render.conventions import LUMA
 from scgen.render.earth_surface import disc_albedo
 from scgen.scenes.spec import SceneSpec
 
@@ -59,4 +60,4 @@ def mean_luminance(rgb: np.ndarray, mask: np.ndarray) -> float:
         return 0.0
     x = rgb[mask].astype(np.float64) / 255.0
     lin = np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
-    return float((lin @ np.array([0.2126, 0.7152, 0.0722])).mean())
+    return float((lin @ LUMA).mean())

@@ -6,12 +6,14 @@ from typing import Any
 
 import numpy as np
 
-LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)  # Rec. 709 luminance of linear RGB
+from scgen.render.conventions import LUMA
+
+LUMA_32 = LUMA.astype(np.float32)  # float32 images stay float32
 
 
 def luminance(image: np.ndarray) -> np.ndarray:
     """H x W linear luminance of an H x W x 3 (or x 1) linear image."""
-    return image[..., 0] if image.shape[-1] == 1 else image @ LUMA
+    return image[..., 0] if image.shape[-1] == 1 else image @ LUMA_32
 
 
 def exposure_shift_ev(

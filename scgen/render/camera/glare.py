@@ -13,6 +13,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from scgen.render.camera import optics
+from scgen.render.conventions import LUMA
 from scgen.render.lighting import SOLAR_CONSTANT
 from scgen.scenes.spec import CameraSpec, SceneSpec
 
@@ -91,7 +93,7 @@ def sun_flare(image: np.ndarray, spec: SceneSpec, instance: np.ndarray, ev_total
         return image, False
     plate = spec.sun.irradiance / SOLAR_CONSTANT * 2.0 ** (-ev_total)  # value of a white plate facing it
     h, w = image.shape[:2]
-    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    y, x = optics.pixel_grid(camera)
     seen = 1.0
     if view.in_view:
         r_px = camera.K_mat[0, 0] * np.tan(SUN_ANGULAR_RADIUS)
@@ -138,5 +140,5 @@ def _hexagon_distance(dx: np.ndarray, dy: np.ndarray, turn: float) -> np.ndarray
 def _tint(plane: np.ndarray, channels: int, colour: np.ndarray) -> np.ndarray:
     """An H x W light plane as H x W x C: coloured for RGB, its luminance for one channel."""
     if channels == 1:
-        return (plane * float(colour @ np.array([0.2126, 0.7152, 0.0722])))[..., None].astype(np.float32)
+        return (plane * float(colour @ LUMA))[..., None].astype(np.float32)
     return (plane[..., None] * colour).astype(np.float32)

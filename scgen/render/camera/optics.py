@@ -17,10 +17,18 @@ SUBSAMPLES = 8  # per pixel and axis, for the anti-aliased disc and line kernels
 
 
 @functools.lru_cache(maxsize=8)
+def pixel_grid(camera: CameraSpec) -> np.ndarray:
+    """(v, u) pixel-centre coordinates of the camera's image, float32 2 x H x W (read-only, shared)."""
+    grid = np.mgrid[0 : camera.height, 0 : camera.width].astype(np.float32)
+    grid.flags.writeable = False
+    return grid
+
+
+@functools.lru_cache(maxsize=8)
 def _radius2(camera: CameraSpec) -> np.ndarray:
     """Squared distance of each pixel from the principal point, 1 at the farthest corner (H x W)."""
     K = camera.K_mat
-    v, u = np.mgrid[0 : camera.height, 0 : camera.width].astype(np.float32)
+    v, u = pixel_grid(camera)
     r2 = (u - K[0, 2]) ** 2 + (v - K[1, 2]) ** 2
     return (r2 / r2.max()).astype(np.float32)
 
@@ -39,7 +47,7 @@ def lateral_colour(image: np.ndarray, camera: CameraSpec, shift_px: float) -> np
         return image
     K = camera.K_mat
     cx, cy = K[0, 2], K[1, 2]
-    v, u = np.mgrid[0 : camera.height, 0 : camera.width].astype(np.float32)
+    v, u = pixel_grid(camera)
     reach = max(np.hypot(x - cx, y - cy) for x in (0, camera.width - 1) for y in (0, camera.height - 1))
     out = image.copy()
     for channel, sign in ((0, 1.0), (2, -1.0)):
