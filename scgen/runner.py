@@ -191,7 +191,10 @@ def shard_indices(n: int, shard: tuple[int, int]) -> list[int]:
 
 
 def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
-    """Render the job's missing samples and finalize; returns a summary with timings."""
+    """Render the job's missing samples and finalize; returns a summary with timings: plan_s (sampling
+    every SceneSpec, the split plan, the static files), render_wall_s, finalize_s, and the workers'
+    summed render_s/other_s."""
+    t_plan = time.perf_counter()
     validate_job(job)
     plan = make_plan(job)
     layout = prepare_output(job, plan)
@@ -202,7 +205,7 @@ def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
         if i not in done
     ]
     settings = WorkerSettings(plan.generator, job.out, job.write)
-    timings = {"render_s": 0.0, "other_s": 0.0}
+    timings = {"plan_s": time.perf_counter() - t_plan, "render_s": 0.0, "other_s": 0.0}
     bar = tqdm(
         total=len(tasks), unit="img", disable=not progress, file=sys.stderr, desc="render", smoothing=0.1
     )
@@ -221,7 +224,9 @@ def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
             run_local(tasks, settings, job.workers, on_done)
     finally:
         bar.close()
+        timings["render_wall_s"] = time.perf_counter() - t0
         n_done = finalize(layout)  # whatever is complete stays usable, even after a failure
+        timings["finalize_s"] = time.perf_counter() - t0 - timings["render_wall_s"]
     return {
         "rendered": len(tasks),
         "skipped": len(done),
