@@ -21,15 +21,15 @@ import cv2
 import numpy as np
 
 from scgen.annotate import annotate
-from scgen.dataset import Layout
+from scgen.dataset.layout import Layout
+from scgen.dataset.writer import WriteOptions, write_sample
 from scgen.generator import Generator
-from scgen.model import TargetModel, load_target
 from scgen.render.blender import BlenderBackend
 from scgen.render.blender_settings import PRESETS, QualityPreset, configure_beauty
-from scgen.runner import write_static_files
+from scgen.run.runner import write_static_files
 from scgen.scenes import load_config
+from scgen.scenes.model import TargetModel, load_target
 from scgen.scenes.spec import SceneSpec
-from scgen.writer import WriteOptions, write_sample
 
 BLENDERPROC_S = 8.4 + 1.0  # BlenderProc on this machine: 640x480 at 16 samples, plus BOP writing
 

@@ -2,7 +2,7 @@
 kernels each sample launches and compiles; then, at 640x480, throughput, time outside the renderer, bytes
 per sample by file kind and the float16-vs-float32 xyz storage error.
 
-Each size renders in a fresh worker process, as `scgen render` runs it (scgen.parent_watch.spawn_pool).
+Each size renders in a fresh worker process, as `scgen render` runs it (scgen.run.parent_watch.spawn_pool).
 Usage: python benchmarks/bench_mitsuba.py [--n 30] [--sizes 64x48,320x240] [--full-n 30] [--out DIR]
 """
 
@@ -18,17 +18,17 @@ import numpy as np
 import trimesh
 
 from scgen.annotate import annotate
-from scgen.dataset import Layout
-from scgen.factors import spec_key
+from scgen.dataset.layout import Layout
+from scgen.dataset.splits import plan_splits
+from scgen.dataset.validate import reprojection_error
+from scgen.dataset.writer import WriteOptions, finalize, write_sample
 from scgen.generator import Generator
-from scgen.model import load_target
-from scgen.parent_watch import spawn_pool
 from scgen.render.base import create_backend
-from scgen.runner import write_static_files
+from scgen.run.parent_watch import spawn_pool
+from scgen.run.runner import write_static_files
 from scgen.scenes import load_config
-from scgen.splits import plan_splits
-from scgen.validate import reprojection_error
-from scgen.writer import WriteOptions, finalize, write_sample
+from scgen.scenes.factors import spec_key
+from scgen.scenes.model import load_target
 
 
 def time_size(size: tuple[int, int], n: int, quality: str, seed: int) -> dict:

@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from scgen.runner import RenderJob, run_render
+from scgen.run.runner import RenderJob, run_render
 
 
 def measure(job: RenderJob) -> tuple[float, float]:

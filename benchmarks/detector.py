@@ -5,7 +5,7 @@
 
 Trains `posenet train-detector`'s loop into RUN (resumes when RUN/last.pt exists), then scores
 RUN/best.pt (RUN/last.pt without a val split) against `bbox_visib` on the whole test split and on each
-factor group of `scgen.stats.sample_groups` (occlusion, distance, background), times the detector at
+factor group of `scgen.dataset.stats.sample_groups` (occlusion, distance, background), times the detector at
 batch 1 (median per-image forward over the test split, current device), checks the floors (FLOOR_*) and
 writes the test split's box file RUN/boxes_test.json, as `posenet boxes --detector` does. With
 --pose-ckpt, the pose checkpoint is evaluated on the test split twice in this run, on ground-truth boxes
@@ -22,13 +22,13 @@ from pathlib import Path
 
 import torch
 
-from posenet.detect import box_metrics, detect_split, detection_entries
-from posenet.detector import load_detector_config, visible_boxes
+from posenet.detection.detect import box_metrics, detect_split, detection_entries
+from posenet.detection.detector import load_detector_config, visible_boxes
+from posenet.detection.train import BEST, train_detector
 from posenet.evaluate import EvalResult, evaluate, format_table, summary_rows
 from posenet.train import LAST
-from posenet.train_detector import BEST, train_detector
-from scgen.atomic import atomic_write_text
-from scgen.stats import sample_groups
+from scgen.dataset.atomic import atomic_write_text
+from scgen.dataset.stats import sample_groups
 
 # issue 21's floors for the CPU preset on the test split (and its training takes <= 20 min on 2 cores)
 FLOOR_MEAN_IOU = 0.75  # with bbox_visib, a miss counting 0

@@ -1,6 +1,6 @@
 """Detector training step time, in training's memory format and in the default one, side by side.
 
-Times `posenet.train_detector.detector_step` (FCOS forward with its losses, backward, Ranger step) of
+Times `posenet.detection.train.detector_step` (FCOS forward with its losses, backward, Ranger step) of
 --config on one fixed batch of the dataset's training images, augmented as training augments them, on
 the current device. The weights are laid out as training lays them out (posenet.train.memory_format:
 channels-last on a CPU) and, on a CPU, also in the default contiguous format.
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import torch
 
-from posenet.detector import (
+from posenet.detection.detector import (
     DetectionDataset,
     DetectorConfig,
     build_detector,
@@ -24,8 +24,8 @@ from posenet.detector import (
     image_groups,
     load_detector_config,
 )
+from posenet.detection.train import detector_step
 from posenet.train import compared_layouts, make_optimizer, pin_cpu_threads
-from posenet.train_detector import detector_step
 
 WARMUP = 3  # untimed steps (allocator, oneDNN kernel selection)
 

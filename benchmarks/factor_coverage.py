@@ -22,10 +22,10 @@ from collections import Counter
 import numpy as np
 
 from scgen.annotate import annotate
-from scgen.factors import FACTOR_GROUPS, distance_groups
 from scgen.generator import Generator
 from scgen.render.lighting import mean_luminance
 from scgen.render.mitsuba_backend import MitsubaBackend
+from scgen.scenes.factors import FACTOR_GROUPS, distance_groups
 
 MIN_SHARE = {"shadow": 0.30}  # every other factor: 0.15
 

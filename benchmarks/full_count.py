@@ -36,10 +36,10 @@ import psutil
 
 from posenet.config import load_config
 from posenet.data import open_split
-from scgen.runner import RenderJob, run_render
-from scgen.splits import SPLITS
-from scgen.stats import compute_stats, format_table
-from scgen.validate import validate_dataset
+from scgen.dataset.splits import SPLITS
+from scgen.dataset.stats import compute_stats, format_table
+from scgen.dataset.validate import validate_dataset
+from scgen.run.runner import RenderJob, run_render
 
 MB = 1024 * 1024
 FULL_SIZE = (640, 480)  # the cost model's image size

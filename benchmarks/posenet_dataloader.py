@@ -26,7 +26,7 @@ from posenet.config import load_config
 from posenet.data import PoseDataset, open_split
 from posenet.models import create_model
 from posenet.train import compared_layouts, make_optimizer, pm_loss_points, train_step, worker_init
-from scgen.runner import RenderJob, run_render
+from scgen.run.runner import RenderJob, run_render
 
 
 def paper_dataset(data: Path) -> PoseDataset:

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import argparse
 
-from scgen.factors import spec_key
+from scgen.dataset.splits import SPLITS, leakage, plan_splits
 from scgen.generator import Generator
-from scgen.model import load_target
 from scgen.scenes import load_config
-from scgen.splits import SPLITS, leakage, plan_splits
+from scgen.scenes.factors import spec_key
+from scgen.scenes.model import load_target
 
 
 def main() -> None:

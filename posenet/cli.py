@@ -16,8 +16,9 @@ from posenet.bench import PAPER, device_label, format_report, resolve_device, ru
 from posenet.config import load_config
 from posenet.data.boxes import boxes_from_gt
 from posenet.data.layout import scan_split
-from posenet.detect import detect_split, detection_entries
-from posenet.detector import load_detector_config
+from posenet.detection.detect import detect_split, detection_entries
+from posenet.detection.detector import load_detector_config
+from posenet.detection.train import train_detector
 from posenet.errors import PosenetError
 from posenet.evaluate import (
     BATCH_SIZE,
@@ -33,10 +34,9 @@ from posenet.evaluate import by_factor as run_by_factor
 from posenet.models import VARIANTS
 from posenet.ransac import PNP_LABELS, PNP_METHODS
 from posenet.train import train as run_train
-from posenet.train_detector import train_detector
 from posenet.viz import heatmap_panel, overlay_panel
-from scgen.atomic import atomic_write_text
-from scgen.cli_errors import one_line_errors
+from scgen.cli import one_line_errors
+from scgen.dataset.atomic import atomic_write_text
 from scgen.errors import ScgenError
 
 PATH = click.Path(path_type=Path)

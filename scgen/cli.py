@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 from collections.abc import Callable
@@ -10,8 +11,26 @@ from typing import Any
 
 import click
 
-from scgen.cli_errors import one_line_errors
 from scgen.errors import ScgenError
+
+
+def one_line_errors(*errors: type[Exception]) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Decorator for click commands: `errors` become click's one-line 'Error: ...' and exit status 1.
+
+    Shared by the scgen and posenet command lines (each passes its own input-error type).
+    """
+
+    def decorate(fn: Callable[..., Any]) -> Callable[..., Any]:
+        @functools.wraps(fn)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return fn(*args, **kwargs)
+            except errors as exc:
+                raise click.ClickException(str(exc)) from None
+
+        return wrapper
+
+    return decorate
 
 
 def parse_resolution(text: str | None) -> tuple[int, int] | None:
@@ -132,9 +151,9 @@ def render(
     quiet,
 ) -> None:
     """Render a dataset: RGB, masks, xyz maps, BOP JSON, metadata.csv and splits.json."""
-    from scgen.runner import RenderJob, run_render
-    from scgen.splits import parse_ratios
-    from scgen.writer import WriteOptions
+    from scgen.dataset.splits import parse_ratios
+    from scgen.dataset.writer import WriteOptions
+    from scgen.run.runner import RenderJob, run_render
 
     res = parse_resolution(resolution)
     overrides = {"background": {"user_dir": str(backgrounds_dir)}} if backgrounds_dir else {}
@@ -166,7 +185,7 @@ def render(
 def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: bool, xyz_dtype: str,
              quiet: bool) -> None:  # fmt: skip
     """Label any BOP dataset: xyz maps of every scene_gt instance, masks and scene_gt_info where missing."""
-    from scgen.bop_annotate import AnnotateJob, AnnotateOptions, disagreement_line, run_annotate
+    from scgen.annotate.bop_annotate import AnnotateJob, AnnotateOptions, disagreement_line, run_annotate
 
     job = AnnotateJob(bop_dir, split, workers or os.cpu_count() or 1, AnnotateOptions(xyz_dtype, overwrite))
     s = run_annotate(job, progress=not quiet)
@@ -183,7 +202,7 @@ def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: b
 @one_line_errors(ScgenError)
 def validate(dataset: Path) -> None:
     """Re-check a dataset's invariants (files, masks, boxes, xyz reprojection) and print a verdict."""
-    from scgen.validate import validate_dataset
+    from scgen.dataset.validate import validate_dataset
 
     problems, n = validate_dataset(dataset)
     if problems:
@@ -234,9 +253,9 @@ def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_grou
     """Group counts of the robustness factors: illumination, shadow, occlusion, background, distance."""
     import json
 
-    from scgen.atomic import atomic_write_text
-    from scgen.stats import compute_stats, format_table, to_csv, write_plots
-    from scgen.stats import sample_groups as draw_groups
+    from scgen.dataset.atomic import atomic_write_text
+    from scgen.dataset.stats import compute_stats, format_table, to_csv, write_plots
+    from scgen.dataset.stats import sample_groups as draw_groups
 
     result = compute_stats(dataset, split, min_group)
     click.echo(format_table(result))
@@ -263,7 +282,7 @@ def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_grou
 @one_line_errors(ScgenError)
 def merge(out: Path, shards: tuple[Path, ...]) -> None:
     """Join shard outputs (same seed, config and model) into OUT, as if rendered in one run."""
-    from scgen.merge import merge_shards
+    from scgen.dataset.merge import merge_shards
 
     n, total = merge_shards(out, list(shards))
     click.echo(f"{out}: {n}/{total} samples after merging {len(shards)} shard folder(s)")
@@ -302,7 +321,7 @@ def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | No
 
     Nothing is written when DATASET, --format or OUT is refused; OUT appears only once complete.
     """
-    from scgen.export import export_dataset
+    from scgen.dataset.export import export_dataset
 
     counts = export_dataset(dataset, fmt, out, overwrite, images)
     click.echo(f"{out}: {fmt} export of {dataset}, " + ", ".join(f"{k} {v}" for k, v in counts.items()))

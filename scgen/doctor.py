@@ -137,8 +137,8 @@ def imagenet_weights() -> Finding:
 
 
 def sky() -> Finding:
-    """The data packages of the real sky (scgen.sky_data); without one, its part of the sky is procedural."""
-    from scgen.sky_data import BLUE_MARBLE, HIPPARCOS, package_dir
+    """The real sky's data packages (scgen.scenes.sky_data); without one, that part is procedural."""
+    from scgen.scenes.sky_data import BLUE_MARBLE, HIPPARCOS, package_dir
 
     uses = {BLUE_MARBLE: ("Blue Marble", "Earth"), HIPPARCOS: ("Hipparcos", "stars")}
     missing = [p for p in uses if package_dir(p) is None]
@@ -149,7 +149,7 @@ def sky() -> Finding:
 
 
 def disk(out: Path) -> Finding:
-    from scgen.runner import existing_parent
+    from scgen.run.runner import existing_parent
 
     folder = existing_parent(out)
     free = shutil.disk_usage(folder).free

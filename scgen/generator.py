@@ -15,9 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from scgen.annotate import Annotation, annotate
-from scgen.buffers import Buffers
-from scgen.model import TargetModel, load_target
+from scgen.render.buffers import Buffers
 from scgen.scenes import SceneSpec, TargetShape, load_config, sample_scene
+from scgen.scenes.model import TargetModel, load_target
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,8 @@ import numpy as np
 from PIL import Image
 
 from scgen.annotate import Annotation
-from scgen.factors import distance_groups
 from scgen.generator import Generator
+from scgen.scenes.factors import distance_groups
 from scgen.scenes.spec import SceneSpec
 
 TILE_W = 320  # width of a sample's RGB tile in the sheet; the three label panels share it

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from scgen.model import TargetModel, load_target
-from scgen.runner import RenderJob, run_render
+from scgen.run.runner import RenderJob, run_render
+from scgen.scenes.model import TargetModel, load_target
 
 SMALL = (320, 240)
 

@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from posenet.cli import main as posenet_main
-from scgen.runner import RenderJob, run_render
+from scgen.run.runner import RenderJob, run_render
 
 # the smoke preset shrunk to a 64 px crop: a checkpoint in seconds for the eval and box-file tests
 TINY_POSE = """\

@@ -7,11 +7,11 @@ import pytest
 import trimesh
 
 from scgen.annotate.annotate import mask_bbox
-from scgen.factors import occlusion_group
+from scgen.dataset.validate import reprojection_error
 from scgen.generator import Generator
-from scgen.model import load_target, normalise_parts
 from scgen.scenes import load_config
-from scgen.validate import reprojection_error
+from scgen.scenes.factors import occlusion_group
+from scgen.scenes.model import load_target, normalise_parts
 
 RES = (320, 240)
 

@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 import trimesh
 
-from scgen.buffers import TARGET_ID
 from scgen.errors import ScgenError
 from scgen.generator import Generator
-from scgen.model import load_target, normalise_parts
 from scgen.render.backgrounds import srgb_to_linear
 from scgen.render.base import create_backend
 from scgen.render.blender import BlenderBackend
 from scgen.render.blender_env import import_bpy, select_device
+from scgen.render.buffers import TARGET_ID
 from scgen.render.lighting import exposure_scale, sun_render_irradiance
 from scgen.render.mitsuba_backend import MitsubaBackend, select_variant
 from scgen.scenes import load_config
+from scgen.scenes.model import load_target, normalise_parts
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, SceneSpec, SunSpec
 
 

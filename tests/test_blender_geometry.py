@@ -13,12 +13,12 @@ import pytest
 import trimesh
 
 from scgen.annotate.annotate import annotate
-from scgen.buffers import TARGET_ID
 from scgen.generator import Generator
-from scgen.model import load_target
 from scgen.render.blender import BlenderBackend
+from scgen.render.buffers import TARGET_ID
 from scgen.render.mitsuba_backend import MitsubaBackend
 from scgen.scenes import load_config
+from scgen.scenes.model import load_target
 
 N_SAMPLES = 8  # seed 0, samples 0-7: clutter, occluders of every group, shadow casters, Earth, no props
 

@@ -18,18 +18,17 @@ from click.testing import CliRunner
 from posenet.config import smoke_config
 from posenet.data import open_split
 from posenet.data.crop import box_center
-from scgen import bop
 from scgen.annotate.annotate import covered_pixels, mask_bbox
 from scgen.cli import main
-from scgen.dataset import Layout
-from scgen.exr import read_xyz_exr
-from scgen.model import EVAL_MAX_EDGE_FRAC, load_target
+from scgen.dataset.exr import read_xyz_exr
+from scgen.dataset.layout import Layout, bop
+from scgen.dataset.validate import validate_dataset
+from scgen.dataset.writer import WriteOptions, finalize
 from scgen.render.base import create_backend
 from scgen.scenes.config import distance_range_m
 from scgen.scenes.geometry import project
+from scgen.scenes.model import EVAL_MAX_EDGE_FRAC, load_target
 from scgen.scenes.spec import CameraSpec, SceneSpec
-from scgen.validate import validate_dataset
-from scgen.writer import WriteOptions, finalize
 from tests.conftest import SMALL, render_dataset
 
 N, SEED = 24, 5  # seed 5 at 320x240: samples 0 and 16 are cut by the image border, 5 test samples

@@ -15,14 +15,13 @@ from click.testing import CliRunner
 
 from posenet.data.layout import scan_split
 from posenet.errors import PosenetError
-from scgen import bop
 from scgen.cli import main
-from scgen.dataset import Layout
-from scgen.exr import read_xyz_exr
+from scgen.dataset.exr import read_xyz_exr
+from scgen.dataset.layout import Layout, bop
+from scgen.dataset.validate import reprojection_error, validate_dataset
 from scgen.generator import Generator
-from scgen.runner import RenderJob, run_render
+from scgen.run.runner import RenderJob, run_render
 from scgen.scenes.camera_config import camera_preset
-from scgen.validate import reprojection_error, validate_dataset
 
 BEFORE = Path(__file__).parent / "data" / "rgb_before_camera_stage.json"
 # the sky and finish as they were when BEFORE was recorded (procedural Earth and stars, CAD finishes)

@@ -8,15 +8,15 @@ import cv2
 import numpy as np
 import pytest
 
-from scgen.buffers import BACKGROUND_ID
+from scgen.dataset.stats import compute_stats
 from scgen.generator import Generator
-from scgen.materials import FINISH_RANGES, MATERIALS
 from scgen.render.backgrounds import srgb_to_linear
-from scgen.runner import RenderJob, run_render
+from scgen.render.buffers import BACKGROUND_ID
+from scgen.run.runner import RenderJob, run_render
 from scgen.scenes import load_config
 from scgen.scenes.finish import finish_group, finished, sample_finish
+from scgen.scenes.materials import FINISH_RANGES, MATERIALS
 from scgen.scenes.rng import factor_rng
-from scgen.stats import compute_stats
 
 TINY = (96, 72)
 SKY = {"earth_map": "procedural", "stars": "procedural"}

@@ -22,7 +22,7 @@ from scgen.render.mitsuba_llvm import (
     libllvm_major,
     newer_libllvms,
 )
-from scgen.runner import RenderJob, run_render
+from scgen.run.runner import RenderJob, run_render
 
 NOTICE = "scgen: Mitsuba cannot render with"
 

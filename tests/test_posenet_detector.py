@@ -14,8 +14,8 @@ from click.testing import CliRunner
 from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
-from posenet.detect import Detection, box_metrics, detect, detector_dataset, load_detector
-from posenet.detector import build_detector, hflip, image_groups, paste_target, visible_boxes
+from posenet.detection.detect import Detection, box_metrics, detect, detector_dataset, load_detector
+from posenet.detection.detector import build_detector, hflip, image_groups, paste_target, visible_boxes
 from posenet.evaluate import by_factor, evaluate
 from posenet.metrics import headline_add
 from scgen.cli import main as scgen_main

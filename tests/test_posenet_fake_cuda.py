@@ -16,7 +16,7 @@ from torch import nn
 from torch._subclasses.fake_tensor import FakeTensorDeviceMismatchError, FakeTensorMode
 
 from posenet.config import LossConfig
-from posenet.detector import build_detector, cpu_config, detector_config_from_dict
+from posenet.detection.detector import build_detector, cpu_config, detector_config_from_dict
 from posenet.geometry import decode_pose
 from posenet.losses import PmObject, pose_losses
 from posenet.metrics import sample_errors

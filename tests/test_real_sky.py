@@ -7,17 +7,17 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from scgen.buffers import BACKGROUND_ID
 from scgen.generator import Generator
-from scgen.model import load_target
 from scgen.render.backgrounds import background_image
+from scgen.render.buffers import BACKGROUND_ID
 from scgen.render.earth_surface import CLOUD_THRESHOLD, cloud_cover, disc_albedo
 from scgen.render.lighting import SOLAR_CONSTANT, earth_albedo_light, exposure_scale
 from scgen.render.stars import SUN_V, pixel_solid_angle, project_stars, star_image, tint
 from scgen.scenes import load_config
 from scgen.scenes.geometry import orthonormal_basis, unit_sphere_hits
+from scgen.scenes.model import load_target
 from scgen.scenes.sky import OBLIQUITY_RAD, earth_frame, sky_frame, sky_labels
-from scgen.sky_data import HIDE_ENV, blue_marble
+from scgen.scenes.sky_data import HIDE_ENV, blue_marble
 
 SMALL = (160, 120)
 PROCEDURAL = {"earth_map": "procedural", "stars": "procedural"}

@@ -8,9 +8,9 @@ import pytest
 
 from scgen.errors import ScgenError
 from scgen.generator import Generator
-from scgen.model import load_target
 from scgen.render.backgrounds import background_image, srgb_to_linear
 from scgen.scenes import load_config
+from scgen.scenes.model import load_target
 
 SMALL = (160, 120)
 

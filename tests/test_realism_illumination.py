@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from scgen.generator import Generator
-from scgen.model import load_target
 from scgen.render.lighting import earth_albedo_light, mean_luminance, sun_render_irradiance
 from scgen.scenes import load_config
+from scgen.scenes.model import load_target
 
 LEVELS = ("weak", "normal", "strong")
 

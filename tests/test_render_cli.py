@@ -15,13 +15,13 @@ import trimesh
 from click.testing import CliRunner
 
 from scgen.annotate import annotate
-from scgen.bop import read_json
 from scgen.cli import main
-from scgen.dataset import Layout
-from scgen.exr import encode_xyz_exr, read_xyz_exr
-from scgen.model import load_target
+from scgen.dataset.bop import read_json
+from scgen.dataset.exr import encode_xyz_exr, read_xyz_exr
+from scgen.dataset.layout import Layout
 from scgen.render.base import create_backend
 from scgen.scenes import SceneSpec, load_config, sample_scene
+from scgen.scenes.model import load_target
 from scgen.scenes.silhouette import TargetShape
 from tests.conftest import SMALL, render_dataset
 

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 
 from posenet.errors import PosenetError
-from scgen.exr import read_xyz_exr
+from scgen.dataset.exr import read_xyz_exr
 
 
 def read_bgr(path: Path) -> np.ndarray:

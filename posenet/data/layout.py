@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from posenet.errors import PosenetError
-from scgen import bop
+from scgen.dataset import bop
 
 
 @dataclass(frozen=True)

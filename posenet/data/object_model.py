@@ -14,7 +14,7 @@ import numpy as np
 import trimesh
 
 from posenet.errors import PosenetError
-from scgen import bop
+from scgen.dataset import bop
 
 SURFACE_POINTS_SEED = 0  # fixed: the PM loss and ADD / ADD-S see the same points in every run
 
@@ -30,7 +30,7 @@ class ObjectModel:
     fps_points: np.ndarray  # (num_regions, 3) surface-region centres, FPS on the vertices
     pm_points: np.ndarray  # (num_pm, 3) uniform surface points: the PM loss and ADD / ADD-S use them
     # (K, 4, 4) transforms S with X_cam = R·(S·X) + t showing the same view, identity first (models_info's
-    # symmetries, continuous ones discretised: scgen.bop.symmetry_transforms); K = 1 without symmetries
+    # symmetries, continuous ones discretised: bop.symmetry_transforms); K = 1 without symmetries
     symmetries: np.ndarray
 
     @property

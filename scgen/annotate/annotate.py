@@ -9,9 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scgen import bop
-from scgen.buffers import TARGET_ID, Buffers
-from scgen.factors import occlusion_group, shadow_label
+from scgen.dataset import bop
+from scgen.render.buffers import TARGET_ID, Buffers
+from scgen.scenes.factors import occlusion_group, shadow_label
 from scgen.scenes.spec import CameraSpec, SceneSpec
 
 Box = tuple[int, int, int, int]  # x, y, w, h in pixels; may reach past the image

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from scgen import bop
 from scgen.annotate.annotate import backproject_to_model, mask_bbox
+from scgen.dataset import bop
 from scgen.scenes.geometry import project
 from scgen.scenes.spec import CameraSpec
 

@@ -8,15 +8,12 @@ pose is unique. Run `python -m scgen.assets.build_spacecraft` to regenerate `ass
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import trimesh
 
-from scgen.dataset import OBJ_ID
-from scgen.model import TargetModel, normalise_parts, write_model_dir
-
-ASSET_DIR = Path(__file__).resolve().parents[2] / "assets" / "spacecraft"
+from scgen.assets import ASSET_DIR
+from scgen.dataset.layout import OBJ_ID
+from scgen.scenes.model import TargetModel, normalise_parts, write_model_dir
 
 
 def _box(extents, centre, material: str) -> tuple[str, trimesh.Trimesh]:

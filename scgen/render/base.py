@@ -5,9 +5,9 @@ from __future__ import annotations
 import importlib.util
 from typing import Protocol
 
-from scgen.buffers import Buffers
 from scgen.errors import ScgenError
-from scgen.model import TargetModel
+from scgen.render.buffers import Buffers
+from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
 BACKENDS = ("blender", "mitsuba")

@@ -1,6 +1,6 @@
 """The six spacecraft material classes as Cycles node trees, and the probe material of the aux render.
 
-Base parameters come from the registry scgen.materials, shared with the Mitsuba backend.
+Base parameters come from the registry scgen.scenes.materials, shared with the Mitsuba backend.
 Details scale with the model's diameter, so any user model gets the same look: MLI foil gets a
 crinkled normal (bumped fractal noise), solar cells a box-projected grid of cells and busbars.
 """
@@ -12,13 +12,13 @@ from typing import Any
 
 import numpy as np
 
-from scgen.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
+from scgen.scenes.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
 
 CRINKLES_PER_DIAMETER = 30.0  # foil wrinkles across the model
 
 
 def build_materials(bpy: ModuleType, diameter: float) -> dict[str, Any]:
-    """One bpy material per class in scgen.model.MATERIALS, details sized for a model of `diameter` m."""
+    """One bpy material per class in scgen.scenes.materials.MATERIALS, sized for a model of `diameter` m."""
     return {name: new_material(bpy, name, material, diameter) for name, material in MATERIALS.items()}
 
 

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from scgen.render.textures import periodic_noise
-from scgen.sky_data import blue_marble
+from scgen.scenes.sky_data import blue_marble
 
 LEVELS = 6
 ALBEDO_SCALE, ALBEDO_GAMMA = 0.7, 0.8

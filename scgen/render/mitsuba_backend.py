@@ -20,15 +20,15 @@ import mitsuba as mi
 import numpy as np
 from trimesh.transformations import transform_points
 
-from scgen.buffers import BACKGROUND_ID, TARGET_ID, Buffers
-from scgen.model import TargetModel
 from scgen.render.backgrounds import background_image
+from scgen.render.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.camera import record_image, render_camera
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, check_quality, render_seed
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_llvm import mitsuba_setup
 from scgen.render.mitsuba_materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
 from scgen.render.props import prop_mesh
+from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
 QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}

@@ -1,6 +1,6 @@
 """Spacecraft material classes as Mitsuba BSDFs, with procedural, deterministic detail textures.
 
-Base parameters come from the registry scgen.materials, as for the Blender backend; the details are
+Base parameters come from the registry scgen.scenes.materials, as for the Blender backend; the details are
 this backend's: crinkled MLI foil (a tileable ridged normal map),
 solar cells (a grid of cells and busbars), anisotropic brushed metal, paint, dark metal.
 Textures are laid on by box projection in the object's own frame, sized by the object's size.
@@ -15,8 +15,8 @@ from typing import Any
 import mitsuba as mi
 import numpy as np
 
-from scgen.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
 from scgen.scenes.finish import finished
+from scgen.scenes.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
 
 CRINKLE_TILES_PER_SIZE = 2.0  # a tile spans half the object: no visible repetition on a face
 TEXTURE_SEED = 2024  # the detail textures are fixed assets, identical for every sample

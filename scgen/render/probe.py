@@ -2,7 +2,7 @@
 
 A renderer can fail where no `except` reaches: LLVM aborts the whole process on a kernel it cannot
 compile (libLLVM 15: `Cannot select: fmaximum`), a GPU driver can crash bpy. So the libLLVM check
-(scgen.render.mitsuba_llvm) and `scgen doctor` ask a child, `python -m scgen.render.probe mitsuba|blender`.
+(scgen.render.mitsuba_llvm) and `scgen doctor` ask a child process (scgen.render.probe_child).
 The child reports what it found (the libLLVM it loaded, Cycles' GPUs) before it renders, so a crash still
 leaves the report; exit status 0 means the sample rendered.
 """
@@ -13,12 +13,8 @@ import json
 import re
 import subprocess
 import sys
-import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    from scgen.model import TargetModel
+from typing import Any
 
 SAMPLE = (0, 3)  # seed, index: props, the Earth and its earthshine: every light and pass a sample can have
 RESOLUTION = (32, 24)
@@ -39,7 +35,7 @@ def probe(backend: str, env: dict[str, str] | None = None) -> ProbeResult:
 
     `env` is the child's environment (default: this process's), e.g. another DRJIT_LIBLLVM_PATH.
     """
-    command = [sys.executable, "-m", "scgen.render.probe", backend]
+    command = [sys.executable, "-m", "scgen.render.probe_child", backend]
     try:
         done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
     except subprocess.TimeoutExpired:
@@ -59,58 +55,3 @@ def failure(stderr: str, returncode: int) -> str:
     if cause is None:
         return f"it exited with status {returncode}" if returncode > 0 else f"it died of signal {-returncode}"
     return re.sub(r" ?0x[0-9a-f]+:?,?", "", cause).split(". ")[0][:200]  # without LLVM's node addresses
-
-
-def _report(**facts: Any) -> None:
-    print(REPORT + json.dumps(facts), flush=True)
-
-
-def _loaded_libllvm() -> str | None:
-    """The libLLVM file this process has mapped (Linux), or None."""
-    with open("/proc/self/maps") as maps:
-        return next((line.split()[-1] for line in maps if "/libLLVM" in line), None)
-
-
-def _mitsuba(model: TargetModel) -> Any:
-    import drjit as dr  # loads libLLVM
-    import mitsuba as mi
-
-    from scgen.render.mitsuba_llvm import LLVM_VARIANT
-
-    version = dr.detail.llvm_version()
-    _report(libllvm=_loaded_libllvm(), version=".".join(map(str, version)) if version[0] > 0 else None)
-    mi.set_variant(LLVM_VARIANT)  # the variant under test; the backend keeps a variant already set
-    from scgen.render.mitsuba_backend import MitsubaBackend
-
-    return MitsubaBackend(model, quality="draft")
-
-
-def _blender(model: TargetModel) -> Any:
-    from scgen.render.blender import BlenderBackend
-    from scgen.render.blender_env import gpu_devices, import_bpy
-
-    gpus = {api: [d.name for d in devices if d.type == api] for api, devices in gpu_devices(import_bpy())}
-    _report(gpus=gpus)
-    return BlenderBackend(model, quality="draft", device="cpu")  # a first GPU render may compile for minutes
-
-
-def main(backend: str) -> None:
-    from scgen.model import load_target
-    from scgen.scenes import TargetShape, load_config, sample_scene
-
-    model = load_target()
-    cfg = load_config(resolution=RESOLUTION)
-    spec = sample_scene(*SAMPLE, cfg, TargetShape.from_mesh(model.mesh, model.diameter))
-    renderer = {"mitsuba": _mitsuba, "blender": _blender}[backend](model)
-    start = time.perf_counter()
-    renderer.render(spec)
-    _report(render_s=round(time.perf_counter() - start, 2))
-
-
-if __name__ == "__main__":
-    from scgen.errors import ScgenError
-
-    try:
-        main(sys.argv[1])
-    except ScgenError as exc:  # a renderer that cannot start here says why in one line, as the CLI does
-        sys.exit(str(exc))

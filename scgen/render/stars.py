@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from scgen.scenes.geometry import project
+from scgen.scenes.sky_data import hipparcos
 from scgen.scenes.spec import CameraSpec
-from scgen.sky_data import hipparcos
 
 SUN_V, SUN_BV = -26.74, 0.65
 RGB_WAVELENGTHS_M = np.array([610e-9, 550e-9, 465e-9])  # effective wavelengths of the R, G, B channels

@@ -16,12 +16,12 @@ from typing import Any
 import yaml
 
 from scgen.errors import ScgenError
-from scgen.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
 from scgen.scenes.camera_config import DEFAULT_CAMERA, camera_preset, check_camera, scale_pixel_sizes
 from scgen.scenes.checks import check_prob, check_range, is_number
+from scgen.scenes.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
 from scgen.scenes.finish import FINISH_MODES
+from scgen.scenes.sky_data import BLUE_MARBLE, HIPPARCOS, resolve_source
 from scgen.scenes.spec import CameraSpec
-from scgen.sky_data import BLUE_MARBLE, HIPPARCOS, resolve_source
 
 USER_BACKGROUND = "user"  # the user's own images (background.user_dir); not a group of the paper
 USER_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -77,7 +77,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "finish": {
         "mode": "varied",  # or nominal: every part keeps its class's finish (scgen.scenes.finish)
         "swap_prob": 0.1,  # per material class: becomes another class
-        "jitter": 1.0,  # share of scgen.materials.FINISH_RANGES used (0: nominal values)
+        "jitter": 1.0,  # share of scgen.scenes.materials.FINISH_RANGES used (0: nominal values)
     },
     "occluders": {
         "group_probs": {"none": 0.25, "slight": 0.25, "moderate": 0.25, "heavy": 0.25},

@@ -1,10 +1,10 @@
 """The target's finish per sample: each material class of its parts jittered, sometimes swapped.
 
 Drawn from the sample's own "finish" stream, so no other factor's draws move. For every class of
-scgen.materials (sorted by name, used by the target or not: the draws do not depend on the model), in a
+scgen.scenes.materials (sorted by name, used by the target or not: the draws do not depend on the model), in a
 fixed number of draws whatever the outcome: with probability swap_prob the
 class becomes another one (uniform), then the base colour, roughness, metallic and crinkle strength are
-drawn within scgen.materials.FINISH_RANGES of the resulting class, scaled by `jitter`. The result maps
+drawn within scgen.scenes.materials.FINISH_RANGES of the resulting class, scaled by `jitter`. The result maps
 each original class to {material, base, roughness, metallic, detail}; nominal mode gives {}.
 Only shading changes: the geometry, and so every label, is the same.
 """
@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from scgen.factors import FINISH_GROUPS
-from scgen.materials import FINISH_RANGES, MATERIALS, Material
+from scgen.scenes.factors import FINISH_GROUPS
+from scgen.scenes.materials import FINISH_RANGES, MATERIALS, Material
 
 FINISH_MODES = ("nominal", "varied")
 

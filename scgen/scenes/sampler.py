@@ -6,7 +6,6 @@ from typing import Any
 
 import numpy as np
 
-from scgen.materials import PROP_MATERIALS
 from scgen.scenes.config import USER_BACKGROUND, distance_range_m
 from scgen.scenes.finish import sample_finish
 from scgen.scenes.geometry import (
@@ -17,6 +16,7 @@ from scgen.scenes.geometry import (
     unit_sphere_hits,
 )
 from scgen.scenes.imaging import sample_imaging
+from scgen.scenes.materials import PROP_MATERIALS
 from scgen.scenes.placement import Blank, place_caster, place_occluder
 from scgen.scenes.rng import factor_rng
 from scgen.scenes.silhouette import CameraView, TargetShape, camera_view, sun_view

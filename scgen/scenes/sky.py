@@ -90,4 +90,3 @@ def sky_labels(params: dict[str, Any]) -> dict[str, float | str]:
             earth_frame(params) @ -np.asarray(params["centre_dir"], np.float64)
         )
     return out
-

@@ -192,7 +192,10 @@ class SceneSpec:
             seed=int(d["seed"]),
             index=int(d["index"]),
             camera=CameraSpec(
-                int(cam["width"]), int(cam["height"]), tuple(cam["K"]), float(cam["exposure_ev"]),
+                int(cam["width"]),
+                int(cam["height"]),
+                tuple(cam["K"]),
+                float(cam["exposure_ev"]),
                 tuple(cam.get("dist", ())),
             ),
             target=pose(d["target"]),

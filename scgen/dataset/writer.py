@@ -21,23 +21,21 @@ from typing import Any
 import cv2
 import numpy as np
 
-from scgen import bop
 from scgen.annotate import Annotation
 from scgen.annotate.annotate import full_projection
-from scgen.atomic import atomic_write_bytes, atomic_write_text
-from scgen.bop import read_json
-from scgen.buffers import Buffers, CameraRecord
-from scgen.dataset import CHUNK, OBJ_ID, Layout, dumps
-from scgen.exr import encode_xyz_exr
-from scgen.factors import FLARE_LABELS, noise_group, occluder_config, spec_key
-from scgen.model import TargetModel
+from scgen.dataset.atomic import atomic_write_bytes, atomic_write_text
+from scgen.dataset.bop import read_json
+from scgen.dataset.exr import encode_xyz_exr
+from scgen.dataset.layout import CHUNK, OBJ_ID, Layout, bop, dumps
+from scgen.render.buffers import Buffers, CameraRecord
 from scgen.scenes.config import distance_range_m
+from scgen.scenes.factors import FLARE_LABELS, noise_group, occluder_config, spec_key, viewpoint_cell
 from scgen.scenes.finish import finish_group
 from scgen.scenes.geometry import matrix_to_quat
 from scgen.scenes.imaging import IDEAL_IMAGING, mid_grey_snr
+from scgen.scenes.model import TargetModel
 from scgen.scenes.sky import sky_labels
 from scgen.scenes.spec import CameraSpec, SceneSpec
-from scgen.splits import viewpoint_cell
 
 METADATA_COLUMNS = (
     "sample_id", "split", "scene_id", "im_id", "illumination", "sun_irradiance_w_m2", "exposure_ev",

@@ -14,21 +14,21 @@ from typing import Any
 from tqdm import tqdm
 
 import scgen
-from scgen.atomic import atomic_write_text, remove_stale_temporaries
-from scgen.bop import read_json
-from scgen.dataset import FORMAT, MANIFEST, OBJ_ID, Layout, dumps
+from scgen.dataset.atomic import atomic_write_text, remove_stale_temporaries
+from scgen.dataset.bop import read_json
+from scgen.dataset.layout import FORMAT, MANIFEST, OBJ_ID, Layout, dumps
+from scgen.dataset.splits import SPLITS, plan_splits, split_lists
+from scgen.dataset.writer import WriteOptions, dataset_depth_scale, existing_sample_ids, finalize
 from scgen.errors import ScgenError
-from scgen.executors import run_local, run_ray
-from scgen.factors import spec_key
 from scgen.generator import Generator
-from scgen.model import write_eval_model_dir, write_model_dir
-from scgen.parent_watch import spawn_pool
 from scgen.render.base import check_backend
 from scgen.render.conventions import check_quality
+from scgen.run.executors import run_local, run_ray
+from scgen.run.parent_watch import spawn_pool
+from scgen.run.worker import Done, Task, WorkerSettings
+from scgen.scenes.factors import spec_key
+from scgen.scenes.model import write_eval_model_dir, write_model_dir
 from scgen.scenes.spec import SceneSpec
-from scgen.splits import SPLITS, plan_splits, split_lists
-from scgen.worker import Done, Task, WorkerSettings
-from scgen.writer import WriteOptions, dataset_depth_scale, existing_sample_ids, finalize
 
 
 @dataclass

@@ -14,10 +14,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from scgen import bop
-from scgen.atomic import atomic_write_bytes, atomic_write_text
+from scgen.assets import ASSET_DIR
+from scgen.dataset import bop
+from scgen.dataset.atomic import atomic_write_bytes, atomic_write_text
 from scgen.errors import ScgenError
-from scgen.materials import MATERIALS
+from scgen.scenes.materials import MATERIALS
 
 _MATERIAL_KEYWORDS = (
     ("gold", "mli_gold"),
@@ -131,7 +132,7 @@ def load_mesh_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
 def load_target(path: str | Path | None = None, keep_scale: bool = False) -> TargetModel:
     """The bundled spacecraft (path None) or any user mesh, normalised to the object frame."""
     if path is None:
-        path = Path(__file__).resolve().parents[1] / "assets" / "spacecraft" / PARTS_FILE
+        path = ASSET_DIR / PARTS_FILE
         if not path.exists():
             raise ScgenError(f"bundled model missing at {path}: run `make assets`")
         return normalise_parts(load_mesh_parts(path), diameter_m=None, name="spacecraft")

@@ -5,9 +5,9 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from scgen.dataset import MANIFEST, Layout, open_dataset
+from scgen.dataset.layout import MANIFEST, Layout, open_dataset
+from scgen.dataset.writer import finalize
 from scgen.errors import ScgenError
-from scgen.writer import finalize
 
 SAMPLE_FOLDERS = ("rgb", "mask", "mask_visib", "xyz", "depth", "records")
 

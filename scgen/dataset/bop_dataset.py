@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from scgen import bop
+from scgen.dataset import bop
 from scgen.errors import ScgenError
 from scgen.scenes.spec import CameraSpec
 

@@ -12,9 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from scgen import bop
-from scgen.bop_dataset import BopImage, open_bop_dataset
-from scgen.dataset import OBJ_ID, TARGET_INSTANCE, Layout, open_dataset, read_metadata
+from scgen.dataset.bop_dataset import BopImage, open_bop_dataset
+from scgen.dataset.layout import OBJ_ID, TARGET_INSTANCE, Layout, bop, open_dataset, read_metadata
 from scgen.errors import ScgenError
 
 

@@ -18,11 +18,10 @@ import numpy as np
 from pycocotools import mask as mask_utils
 
 import scgen
-from scgen import bop
-from scgen.dataset import OBJ_ID, dumps
+from scgen.dataset.export.source import Sample, Source
+from scgen.dataset.layout import OBJ_ID, bop, dumps
+from scgen.dataset.splits import SPLITS
 from scgen.errors import ScgenError
-from scgen.export.source import Sample, Source
-from scgen.splits import SPLITS
 
 IMAGE_FIELDS = ("id", "file_name", "width", "height")  # COCO's own keys of an image entry
 

@@ -12,8 +12,8 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 
 from scgen.errors import ScgenError
-from scgen.parent_watch import spawn_pool
-from scgen.worker import Done, SampleWorker, Task, WorkerSettings
+from scgen.run.parent_watch import spawn_pool
+from scgen.run.worker import Done, SampleWorker, Task, WorkerSettings
 
 MAX_ATTEMPTS = 3  # a sample is tried at most this often before the run stops
 _worker: SampleWorker | None = None

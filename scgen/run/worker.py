@@ -10,10 +10,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from scgen.dataset import Layout
+from scgen.dataset.layout import Layout
+from scgen.dataset.writer import WriteOptions, write_sample
 from scgen.generator import Generator
 from scgen.scenes.spec import SceneSpec
-from scgen.writer import WriteOptions, write_sample
 
 
 @dataclass(frozen=True)

@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from scgen.dataset import dumps
+from scgen.dataset.export.output import place_image
+from scgen.dataset.export.source import Sample, Source
+from scgen.dataset.layout import dumps
 from scgen.errors import ScgenError
-from scgen.export.output import place_image
-from scgen.export.source import Sample, Source
 from scgen.scenes.geometry import matrix_to_quat
 
 DOMAIN = "synthetic"  # SPEED+'s folder of one image domain: {dataroot}/{domain}/{images,*.json}

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from scgen.atomic import TMP_MARK
+from scgen.dataset.atomic import TMP_MARK
 from scgen.errors import ScgenError
 
 IMAGE_MODES = ("copy", "hardlink", "symlink")  # how exported images refer to the rendered ones

@@ -28,17 +28,17 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from scgen import bop
 from scgen.annotate.bop_labels import InstanceLabels, VisibDisagreement, instance_labels, projection_box
-from scgen.atomic import atomic_write_bytes, atomic_write_text, remove_stale_temporaries
-from scgen.bop import read_json
-from scgen.bop_dataset import BopDataset, BopImage, open_bop_dataset, read_models
-from scgen.dataset import dumps
+from scgen.dataset import bop
+from scgen.dataset.atomic import atomic_write_bytes, atomic_write_text, remove_stale_temporaries
+from scgen.dataset.bop import read_json
+from scgen.dataset.bop_dataset import BopDataset, BopImage, open_bop_dataset, read_models
+from scgen.dataset.exr import encode_xyz_exr
+from scgen.dataset.layout import dumps
+from scgen.dataset.writer import encode_png
 from scgen.errors import ScgenError
-from scgen.exr import encode_xyz_exr
-from scgen.parent_watch import spawn_pool
 from scgen.render import raycast
-from scgen.writer import encode_png
+from scgen.run.parent_watch import spawn_pool
 
 RECORDS_DIR = "annotate"
 Models = dict[int, tuple[np.ndarray, np.ndarray]]

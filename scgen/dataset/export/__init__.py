@@ -1,7 +1,7 @@
 """`scgen export`: a finished scgen dataset in the layouts other toolchains read, split kept.
 
-- speedplus: SPEED+'s camera.json, images and train/validation/test labels (scgen.export.speedplus);
-- coco: one COCO instances file per split, pointing at the dataset's images (scgen.export.coco).
+- speedplus: SPEED+'s camera.json, images and train/validation/test labels (scgen.dataset.export.speedplus);
+- coco: one COCO instances file per split, pointing at the dataset's images (scgen.dataset.export.coco).
 
 Input, format and OUT are checked before anything is written; the export is written into a folder beside
 OUT that becomes OUT only once complete.
@@ -11,10 +11,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from scgen.dataset.export import coco, speedplus
+from scgen.dataset.export.output import IMAGE_MODES, check_out, staged
+from scgen.dataset.export.source import read_source
 from scgen.errors import ScgenError
-from scgen.export import coco, speedplus
-from scgen.export.output import IMAGE_MODES, check_out, staged
-from scgen.export.source import read_source
 
 FORMATS = ("speedplus", "coco")
 

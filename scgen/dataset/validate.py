@@ -10,16 +10,15 @@ import numpy as np
 import trimesh
 from tqdm import tqdm
 
-from scgen import bop
 from scgen.annotate.annotate import full_projection
-from scgen.bop import read_json
-from scgen.bop_dataset import BopDataset, BopImage, is_bop_dataset, open_bop_dataset
-from scgen.dataset import OBJ_ID, Layout, open_dataset, read_metadata
+from scgen.dataset.bop import read_json
+from scgen.dataset.bop_dataset import BopDataset, BopImage, is_bop_dataset, open_bop_dataset
+from scgen.dataset.exr import read_xyz_exr
+from scgen.dataset.layout import OBJ_ID, Layout, bop, open_dataset, read_metadata
+from scgen.dataset.writer import dataset_target, target_lists
 from scgen.errors import ScgenError
-from scgen.exr import read_xyz_exr
-from scgen.model import EVAL_MAX_EDGE_FRAC
+from scgen.scenes.model import EVAL_MAX_EDGE_FRAC
 from scgen.scenes.spec import CameraSpec
-from scgen.writer import dataset_target, target_lists
 
 REPROJ_TOL_PX = 0.5
 REPROJ_MIN_SHARE = 0.995

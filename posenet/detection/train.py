@@ -18,8 +18,8 @@ from torch.utils.data import DataLoader
 from torchvision.models.detection import FCOS
 
 from posenet.checkpoint import load_checkpoint, save_checkpoint
-from posenet.detect import box_metrics, detect
-from posenet.detector import (
+from posenet.detection.detect import box_metrics, detect
+from posenet.detection.detector import (
     DetectionDataset,
     DetectorConfig,
     build_detector,
@@ -38,7 +38,7 @@ from posenet.train import (
     stop_step,
     worker_init,
 )
-from scgen.atomic import atomic_write_text
+from scgen.dataset.atomic import atomic_write_text
 
 BEST = "best.pt"
 

@@ -19,7 +19,7 @@ from torchvision.models.detection import FCOS
 from posenet.checkpoint import load_checkpoint
 from posenet.data.boxes import miss_entry
 from posenet.data.layout import Instance
-from posenet.detector import (
+from posenet.detection.detector import (
     DetectionDataset,
     build_detector,
     collate,

@@ -8,8 +8,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from scgen import bop
-from scgen.bop import read_json
+from scgen.dataset import bop
+from scgen.dataset.bop import read_json
 from scgen.errors import ScgenError
 
 MANIFEST = "scgen.json"

@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from scgen.dataset import read_metadata
+from scgen.dataset.layout import read_metadata
+from scgen.dataset.splits import SPLITS
 from scgen.errors import ScgenError
-from scgen.factors import FACTOR_GROUPS, distance_groups
+from scgen.scenes.factors import FACTOR_GROUPS, distance_groups, view_direction
 from scgen.scenes.geometry import quat_to_matrix
-from scgen.splits import SPLITS, view_direction
 
 
 def group_labels(rows: list[dict[str, str]]) -> dict[str, list[str]]:
@@ -138,6 +138,6 @@ def write_plots(root: str | Path, split: str | None, out_dir: Path) -> list[Path
 
 
 def _view_direction(row: dict[str, str]) -> np.ndarray:
-    """The metadata row's viewing direction in the model frame (see splits.view_direction)."""
+    """The metadata row's viewing direction in the model frame (see factors.view_direction)."""
     R = quat_to_matrix(np.array([float(row[k]) for k in ("qw", "qx", "qy", "qz")]))
     return view_direction(R, np.array([float(row[k]) for k in ("tx", "ty", "tz")]))

@@ -20,67 +20,6 @@ SPLITS = ("train", "val", "test")
 DEFAULT_RATIOS = (0.7, 0.1, 0.2)
 
 
-def viewpoint_cells() -> np.ndarray:
-    """The 20 face centres of a regular icosahedron: the documented viewpoint partition of S^2."""
-    p = (1 + 5**0.5) / 2
-    verts = np.array(
-        [
-            [-1, p, 0],
-            [1, p, 0],
-            [-1, -p, 0],
-            [1, -p, 0],
-            [0, -1, p],
-            [0, 1, p],
-            [0, -1, -p],
-            [0, 1, -p],
-            [p, 0, -1],
-            [p, 0, 1],
-            [-p, 0, -1],
-            [-p, 0, 1],
-        ],
-        float,
-    )
-    verts /= np.linalg.norm(verts, axis=1, keepdims=True)
-    faces = [
-        (0, 11, 5),
-        (0, 5, 1),
-        (0, 1, 7),
-        (0, 7, 10),
-        (0, 10, 11),
-        (1, 5, 9),
-        (5, 11, 4),
-        (11, 10, 2),
-        (10, 7, 6),
-        (7, 1, 8),
-        (3, 9, 4),
-        (3, 4, 2),
-        (3, 2, 6),
-        (3, 6, 8),
-        (3, 8, 9),
-        (4, 9, 5),
-        (2, 4, 11),
-        (6, 2, 10),
-        (8, 6, 7),
-        (9, 8, 1),
-    ]
-    centres = verts[np.array(faces)].mean(axis=1)
-    return centres / np.linalg.norm(centres, axis=1, keepdims=True)
-
-
-_CELLS = viewpoint_cells()
-
-
-def view_direction(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Unit direction from the model towards the camera, in the model frame: -R^T t / |t|."""
-    view = -np.asarray(R).T @ np.asarray(t)
-    return view / np.linalg.norm(view)
-
-
-def viewpoint_cell(R: np.ndarray, t: np.ndarray) -> int:
-    """Index of the icosahedron face containing the camera's direction seen from the model frame."""
-    return int(np.argmax(_CELLS @ view_direction(R, t)))
-
-
 def parse_ratios(text: str | Sequence[float]) -> tuple[float, float, float]:
     """'0.7,0.1,0.2' -> (0.7, 0.1, 0.2); they must be three non-negative numbers summing to 1."""
     try:
