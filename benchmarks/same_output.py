@@ -1,0 +1,80 @@
+"""Is a fixed seed's dataset byte-identical with the code at another revision? For changes that must
+not move a byte (a reorganisation, a speed-up): renders the same job with the code at REV (a temporary
+git worktree on PYTHONPATH) and with this tree, for each backend, and compares every file.
+
+Prints one line per backend (files compared, files that differ) and each differing file; exit status 1
+if any file differs.
+
+Usage: python benchmarks/same_output.py --against REV [--backends mitsuba blender] [--n 8] [--seed 21]
+       [--resolution 160x120]
+"""
+
+from __future__ import annotations
+
+import argparse
+import filecmp
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def render(code: Path, out: Path, backend: str, n: int, seed: int, resolution: str) -> None:
+    """`scgen render` of the job with the scgen package found in `code`."""
+    env = {**os.environ, "PYTHONPATH": str(code)}
+    options = {"--n": n, "--seed": seed, "--out": out, "--backend": backend, "--resolution": resolution,
+               "--quality": "draft", "--workers": 1}  # fmt: skip
+    command = [
+        sys.executable,
+        "-m",
+        "scgen.cli",
+        "render",
+        "--quiet",
+        *(str(v) for kv in options.items() for v in kv),
+    ]
+    subprocess.run(command, env=env, check=True, cwd=code)
+
+
+def differing_files(a: Path, b: Path) -> tuple[int, list[str]]:
+    """(files compared, relative paths that differ or exist on one side only)."""
+    files_a = {p.relative_to(a) for p in a.rglob("*") if p.is_file()}
+    files_b = {p.relative_to(b) for p in b.rglob("*") if p.is_file()}
+    differ = sorted(str(p) for p in files_a ^ files_b)
+    differ += sorted(str(p) for p in files_a & files_b if not filecmp.cmp(a / p, b / p, shallow=False))
+    return len(files_a | files_b), differ
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--against", required=True, help="git revision to compare with (e.g. HEAD~1, a tag)")
+    ap.add_argument("--backends", nargs="+", default=["mitsuba", "blender"])
+    ap.add_argument("--n", type=int, default=8)
+    ap.add_argument("--seed", type=int, default=21)
+    ap.add_argument("--resolution", default="160x120")
+    args = ap.parse_args()
+    failed = False
+    with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "code"
+        subprocess.run(
+            ["git", "worktree", "add", "--detach", "-q", str(old), args.against], cwd=ROOT, check=True
+        )
+        try:
+            for backend in args.backends:
+                before, after = Path(tmp) / f"{backend}_before", Path(tmp) / f"{backend}_after"
+                render(old, before, backend, args.n, args.seed, args.resolution)
+                render(ROOT, after, backend, args.n, args.seed, args.resolution)
+                count, differ = differing_files(before, after)
+                print(f"{backend}: {count} files compared, {len(differ)} differ")
+                for path in differ:
+                    print(f"  differs: {path}")
+                failed |= bool(differ)
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, check=True)
+    sys.exit(1 if failed else 0)
+
+
+if __name__ == "__main__":
+    main()
