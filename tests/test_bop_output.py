@@ -20,14 +20,16 @@ from posenet.data import open_split
 from posenet.data.crop import box_center
 from scgen.annotate.annotate import covered_pixels, mask_bbox
 from scgen.cli import main
+from scgen.dataset import bop
 from scgen.dataset.exr import read_xyz_exr
-from scgen.dataset.layout import Layout, bop
+from scgen.dataset.layout import Layout
+from scgen.dataset.models import EVAL_MAX_EDGE_FRAC
 from scgen.dataset.validate import validate_dataset
 from scgen.dataset.writer import WriteOptions, finalize
 from scgen.render.base import create_backend
 from scgen.scenes.config import distance_range_m
 from scgen.scenes.geometry import project
-from scgen.scenes.model import EVAL_MAX_EDGE_FRAC, load_target
+from scgen.scenes.model import load_target
 from scgen.scenes.spec import CameraSpec, SceneSpec
 from tests.conftest import SMALL, render_dataset
 

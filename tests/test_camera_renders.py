@@ -16,8 +16,9 @@ from click.testing import CliRunner
 from posenet.data.layout import scan_split
 from posenet.errors import PosenetError
 from scgen.cli import main
+from scgen.dataset import bop
 from scgen.dataset.exr import read_xyz_exr
-from scgen.dataset.layout import Layout, bop
+from scgen.dataset.layout import Layout
 from scgen.dataset.validate import reprojection_error, validate_dataset
 from scgen.generator import Generator
 from scgen.run.runner import RenderJob, run_render

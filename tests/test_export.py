@@ -19,7 +19,8 @@ from pycocotools.cocoeval import COCOeval
 from scipy.spatial.transform import Rotation
 
 from scgen.cli import main
-from scgen.dataset.layout import Layout, bop
+from scgen.dataset import bop
+from scgen.dataset.layout import Layout
 
 # SPEED+'s own camera.json distortion (k1, k2, p1, p2, k3), as a cam_dist the exporter must carry over
 SPEEDPLUS_DIST = [-0.22383016606510672, 0.5140979708255638, -0.0006649961199834066, -0.00021404771667484594,

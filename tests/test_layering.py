@@ -13,7 +13,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 RENDERERS = ("bpy", "mitsuba", "drjit", "scgen.render")
-# what a renderer hands on (Buffers), the one scgen.render module annotation reads
+# what a renderer hands on (Buffers): the one scgen.render module annotation and the writer import
 RENDER_OUTPUT = {"scgen.render", "scgen.render.buffers"}
 CLI_MODULES = {"scgen/cli.py", "posenet/cli.py"}
 CLI_IMPORTS = {"click", "scgen.cli", "posenet.cli"}
@@ -32,6 +32,7 @@ def loaded_modules(*modules: str) -> set[str]:
         (
             "scgen.scenes",
             "scgen.annotate",
+            "scgen.annotate.bop_labels",
             "scgen.scenes.factors",
             "scgen.dataset.bop",
             "scgen.dataset.bop_dataset",

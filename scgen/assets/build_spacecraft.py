@@ -13,7 +13,8 @@ import trimesh
 
 from scgen.assets import ASSET_DIR
 from scgen.dataset.layout import OBJ_ID
-from scgen.scenes.model import TargetModel, normalise_parts, write_model_dir
+from scgen.dataset.models import write_model_dir
+from scgen.scenes.model import TargetModel, normalise_parts
 
 
 def _box(extents, centre, material: str) -> tuple[str, trimesh.Trimesh]:

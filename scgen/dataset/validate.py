@@ -11,13 +11,14 @@ import trimesh
 from tqdm import tqdm
 
 from scgen.annotate.annotate import full_projection
+from scgen.dataset import bop
 from scgen.dataset.bop import read_json
 from scgen.dataset.bop_dataset import BopDataset, BopImage, is_bop_dataset, open_bop_dataset
 from scgen.dataset.exr import read_xyz_exr
-from scgen.dataset.layout import OBJ_ID, Layout, bop, open_dataset, read_metadata
+from scgen.dataset.layout import OBJ_ID, Layout, open_dataset, read_metadata
+from scgen.dataset.models import EVAL_MAX_EDGE_FRAC
 from scgen.dataset.writer import dataset_target, target_lists
 from scgen.errors import ScgenError
-from scgen.scenes.model import EVAL_MAX_EDGE_FRAC
 from scgen.scenes.spec import CameraSpec
 
 REPROJ_TOL_PX = 0.5

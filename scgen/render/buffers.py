@@ -1,7 +1,7 @@
 """What a renderer returns for one scene: per-pixel buffers and the instance-id convention.
 
-A neutral module: renderers produce Buffers, annotate and the writer consume them, and neither side
-needs to import the other.
+Renderers produce Buffers, annotate and the writer consume them: the one scgen.render module that
+annotation and the writer import.
 """
 
 from __future__ import annotations

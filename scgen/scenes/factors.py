@@ -1,4 +1,5 @@
-"""The scene factors of the paper's robustness table: their groups, thresholds and combination key.
+"""The scene factors of the paper's robustness table: their groups, thresholds, the viewpoint cells
+(an icosahedron's 20 faces) and the combination key.
 
 One home for the vocabulary the sampler draws from, the annotator measures, the split planner keys
 on, `scgen stats` counts and `scgen preview` prints.

@@ -18,8 +18,9 @@ import numpy as np
 from pycocotools import mask as mask_utils
 
 import scgen
+from scgen.dataset import bop
 from scgen.dataset.export.source import Sample, Source
-from scgen.dataset.layout import OBJ_ID, bop, dumps
+from scgen.dataset.layout import OBJ_ID, dumps
 from scgen.dataset.splits import SPLITS
 from scgen.errors import ScgenError
 

@@ -12,8 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from scgen.dataset import bop
 from scgen.dataset.bop_dataset import BopImage, open_bop_dataset
-from scgen.dataset.layout import OBJ_ID, TARGET_INSTANCE, Layout, bop, open_dataset, read_metadata
+from scgen.dataset.layout import OBJ_ID, TARGET_INSTANCE, Layout, open_dataset, read_metadata
 from scgen.errors import ScgenError
 
 
