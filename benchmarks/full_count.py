@@ -170,7 +170,9 @@ def main() -> None:
     trace.phase = "render"  # run_render's own plan/render/finalize split is in its summary
     summary = run_render(job, progress=True)
     stats_s, stats = timed(trace, "stats", lambda: compute_stats(data))
-    validate_s, (problems, checked) = timed(trace, "validate", lambda: validate_dataset(data))
+    validate_s, (problems, checked) = timed(
+        trace, "validate", lambda: validate_dataset(data, workers=args.workers)
+    )
     index_s, instances = timed(trace, "indexing", lambda: index_splits(data))
     trace.stop()
     trace.write_csv(args.out / "full_count_rss.csv")

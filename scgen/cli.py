@@ -199,12 +199,18 @@ def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: b
 
 @main.command()
 @click.argument("dataset", type=click.Path(path_type=Path))
+@click.option(
+    "--workers", type=int, default=None, help="Processes checking scene folders (default: CPU cores)."
+)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
 @one_line_errors(ScgenError)
-def validate(dataset: Path) -> None:
+def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
     """Re-check a dataset's invariants (files, masks, boxes, xyz reprojection) and print a verdict."""
     from scgen.dataset.validate import validate_dataset
 
-    problems, n = validate_dataset(dataset)
+    if workers is not None and workers <= 0:
+        raise ScgenError(f"--workers must be positive, got {workers}")
+    problems, n = validate_dataset(dataset, progress=not quiet, workers=workers or os.cpu_count() or 1)
     if problems:
         for p in problems[:50]:
             click.echo(f"FAIL {p}")

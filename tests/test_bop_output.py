@@ -233,6 +233,7 @@ def test_validate_names_bad_bop_files(dataset: Path, tmp_path: Path):
     infos["0"] = cut["scene_gt_info"]
     infos_path.write_text(json.dumps(infos))
     problems, _ = validate_dataset(bad, progress=False)
+    assert sorted(validate_dataset(bad, progress=False, workers=2)[0]) == sorted(problems)  # a process pool
     text = "\n".join(problems)
     assert "test_targets_bop24.json missing" in text
     assert "models_eval has an edge of" in text

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import functools
+from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
@@ -17,49 +20,76 @@ from scgen.dataset.bop_dataset import BopDataset, BopImage, is_bop_dataset, open
 from scgen.dataset.exr import read_xyz_exr
 from scgen.dataset.layout import OBJ_ID, Layout, open_dataset, read_metadata
 from scgen.dataset.models import EVAL_MAX_EDGE_FRAC
-from scgen.dataset.writer import dataset_target, target_lists
+from scgen.dataset.writer import TargetImage, dataset_target, target_images, target_lists
 from scgen.errors import ScgenError
+from scgen.run.parent_watch import spawn_pool
 from scgen.scenes.spec import CameraSpec
 
 REPROJ_TOL_PX = 0.5
 REPROJ_MIN_SHARE = 0.995
 
 
-def validate_dataset(root: str | Path, progress: bool = True) -> tuple[list[str], int]:
-    """(problems, number of samples checked); an empty problem list means the dataset is sound."""
+def validate_dataset(root: str | Path, progress: bool = True, workers: int = 1) -> tuple[list[str], int]:
+    """(problems, number of samples checked); an empty problem list means the dataset is sound.
+
+    The samples are checked one scene folder at a time, on `workers` processes when more than one.
+    """
     if not Layout(root).manifest_path.is_file() and is_bop_dataset(Path(root)):
         return validate_bop_dataset(root, progress)  # a BOP dataset scgen did not render
-    layout, manifest = open_dataset(root)
+    layout, _ = open_dataset(root)
     problems = check_models(layout)
-    target = dataset_target(layout)
-    rows = {int(r["sample_id"]): r for r in read_metadata(root)}
+    rows = {int(r["sample_id"]) for r in read_metadata(root)}
     splits = read_json(layout.splits_path)["splits"]
     split_of = {i: s for s, ids in splits.items() for i in ids}
+    by_scene: dict[Path, list[Path]] = defaultdict(list)
+    for path in layout.record_paths():
+        by_scene[path.parent.parent].append(path)
+    n = sum(len(paths) for paths in by_scene.values())
+    if len(rows) != n:
+        problems.append(f"metadata.csv has {len(rows)} rows but {n} samples are on disk")
+    images: list[TargetImage] = []
+    check = functools.partial(check_scene, layout.root)
+    with (
+        tqdm(total=n, desc="validate", unit="img", disable=not progress) as bar,
+        spawn_pool(workers) if workers > 1 else contextlib.nullcontext() as pool,
+    ):
+        for seen, found, scene_images in (pool.map if pool else map)(check, list(by_scene.values())):
+            for sid, split in seen:
+                if split_of.get(sid) != split:
+                    problems.append(
+                        f"sample {sid}: in folder '{split}' but splits.json says '{split_of.get(sid)}'"
+                    )
+                if sid not in rows:
+                    problems.append(f"sample {sid}: missing from metadata.csv")
+            problems += found
+            images += scene_images
+            bar.update(len(seen))
+    problems += check_test_targets(layout, sorted(images, key=lambda image: image[1]))
+    return problems, n
+
+
+def check_scene(
+    root: Path, records: list[Path]
+) -> tuple[list[tuple[int, str]], list[str], list[TargetImage]]:
+    """Check the samples of one scene folder (their record files): ((sample id, split) of each record,
+    problems, the test images among them)."""
+    layout, manifest = open_dataset(root)
+    target = dataset_target(layout)
     lo, size = bop.model_box_m(bop.read_models_info(layout.root)[str(OBJ_ID)])
-    records = list(layout.record_paths())
-    if len(rows) != len(records):
-        problems.append(f"metadata.csv has {len(rows)} rows but {len(records)} samples are on disk")
-    scene_files: dict[Path, dict[str, Any]] = {}
-    test_records = []
-    for path in tqdm(records, desc="validate", unit="img", disable=not progress):
+    scene_files = read_scene_files(records[0].parent.parent)
+    seen, problems, images = [], [], []
+    for path in records:
         rec = read_json(path)
         sid, split = rec["sample_id"], rec["split"]
+        seen.append((sid, split))
         if split == bop.TEST_SPLIT:
-            test_records.append(rec)
-        if split_of.get(sid) != split:
-            problems.append(f"sample {sid}: in folder '{split}' but splits.json says '{split_of.get(sid)}'")
-        if sid not in rows:
-            problems.append(f"sample {sid}: missing from metadata.csv")
-        scene = layout.chunk_dir(split, sid)
-        if scene not in scene_files:
-            scene_files[scene] = read_scene_files(scene)
-        bop_problems = check_bop_entries(scene_files[scene], rec)
+            images += target_images([rec])
+        bop_problems = check_bop_entries(scene_files, rec)
         problems += [f"sample {sid}: {p}" for p in bop_problems]
         if not bop_problems:
             found = check_sample(layout, manifest, rec, lo, lo + size, target)
             problems += [f"sample {sid}: {p}" for p in found]
-    problems += check_test_targets(layout, sorted(test_records, key=lambda r: r["sample_id"]))
-    return problems, len(records)
+    return seen, problems, images
 
 
 def check_models(layout: Layout) -> list[str]:
@@ -88,10 +118,10 @@ def check_models(layout: Layout) -> list[str]:
     return out
 
 
-def check_test_targets(layout: Layout, test_records: list[dict[str, Any]]) -> list[str]:
-    """The test target lists at the root must list exactly the test samples on disk."""
+def check_test_targets(layout: Layout, images: list[TargetImage]) -> list[str]:
+    """The test target lists at the root must list exactly the test samples on disk (in sample order)."""
     out = []
-    for kind, expected in target_lists(test_records).items():
+    for kind, expected in target_lists(images).items():
         path = layout.test_targets(kind)
         try:
             found = read_json(path)

@@ -220,35 +220,51 @@ def build_record(
 
 
 def finalize(layout: Layout) -> int:
-    """Assemble chunk JSON files and metadata.csv from every record; returns the sample count."""
-    records = [read_json(p) for p in layout.record_paths()]
-    records.sort(key=lambda r: r["sample_id"])
-    chunks: dict[tuple[str, int], list[dict[str, Any]]] = defaultdict(list)
-    for r in records:
-        chunks[(r["split"], r["sample_id"] // CHUNK)].append(r)
-    for (split, _), recs in chunks.items():
-        d = layout.chunk_dir(split, recs[0]["sample_id"])
-        for name in bop.SCENE_FILES:
-            atomic_write_text(bop.scene_file(d, name), dumps({str(r["sample_id"]): r[name] for r in recs}))
-    for kind, targets in target_lists([r for r in records if r["split"] == bop.TEST_SPLIT]).items():
-        atomic_write_text(layout.test_targets(kind), dumps(targets))
+    """Assemble chunk JSON files, the test targets and metadata.csv from every record; returns the
+    sample count. Reads one chunk's records at a time (from every split), so its memory stays that of a
+    chunk however large the dataset; rows and targets come out in sample order."""
+    by_chunk: dict[int, list[Path]] = defaultdict(list)
+    for path in layout.record_paths():
+        by_chunk[int(path.stem) // CHUNK].append(path)
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=METADATA_COLUMNS, lineterminator="\n")
     writer.writeheader()
-    for r in records:
-        writer.writerow({k: _fmt(r["metadata"][k]) for k in METADATA_COLUMNS})
+    images: list[TargetImage] = []
+    for chunk in sorted(by_chunk):
+        records = sorted((read_json(p) for p in by_chunk[chunk]), key=lambda r: r["sample_id"])
+        by_split: dict[str, list[dict[str, Any]]] = defaultdict(list)
+        for r in records:
+            by_split[r["split"]].append(r)
+            writer.writerow({k: _fmt(r["metadata"][k]) for k in METADATA_COLUMNS})
+        for split, recs in by_split.items():
+            d = layout.chunk_dir(split, recs[0]["sample_id"])
+            for name in bop.SCENE_FILES:
+                atomic_write_text(
+                    bop.scene_file(d, name), dumps({str(r["sample_id"]): r[name] for r in recs})
+                )
+        images += target_images(by_split.get(bop.TEST_SPLIT, []))
+    for kind, targets in target_lists(images).items():
+        atomic_write_text(layout.test_targets(kind), dumps(targets))
     atomic_write_text(layout.metadata_path, out.getvalue())
-    return len(records)
+    return sum(len(paths) for paths in by_chunk.values())
 
 
-def target_lists(test_records: list[dict[str, Any]]) -> dict[str, list[dict[str, int]]]:
-    """{"bop19": [...], "bop24": [...]}: the test target lists of the test samples' records (in order)."""
-    ids = [(r["sample_id"] // CHUNK, r["sample_id"]) for r in test_records]
-    with_gt = [
-        (scene, im, r["scene_gt"], r["scene_gt_info"])
-        for (scene, im), r in zip(ids, test_records, strict=True)
+TargetImage = tuple[int, int, list[dict[str, Any]], list[dict[str, Any]]]  # scene, image, scene_gt, gt_info
+
+
+def target_images(test_records: list[dict[str, Any]]) -> list[TargetImage]:
+    """(scene_id, im_id, scene_gt, scene_gt_info) of each test record, what the target lists read."""
+    return [
+        (r["sample_id"] // CHUNK, r["sample_id"], r["scene_gt"], r["scene_gt_info"]) for r in test_records
     ]
-    return {"bop19": bop.targets_bop19(with_gt), "bop24": bop.targets_bop24(ids)}
+
+
+def target_lists(images: list[TargetImage]) -> dict[str, list[dict[str, int]]]:
+    """{"bop19": [...], "bop24": [...]}: the test target lists of these test images (in order)."""
+    return {
+        "bop19": bop.targets_bop19(images),
+        "bop24": bop.targets_bop24([i[:2] for i in images]),
+    }
 
 
 def _fmt(v: Any) -> str:
