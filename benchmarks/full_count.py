@@ -7,10 +7,10 @@ Prints, and writes to OUT/full_count.json (with the RSS trace in OUT/full_count_
 - peak RSS of the main process and of the largest worker per phase, and both over the render in
   tenths of its time (flat means no per-sample growth);
 - bytes per sample on disk, by file kind;
-- a cost model for the same count with Blender at 640x480 on 2, 16 and 64 cores: the measured
-  per-sample render core-seconds (--blender-core-s, from benchmarks/bench_workers.py) spread over the
-  cores, plus this run's plan/finalize/stats/validate/indexing times (single process, scaled by the
-  pixels where the phase reads images).
+- a cost model for the same count with Blender at 640x480 on 2, 16 and 64 cores (see cost_model): the
+  per-sample render core-seconds (--blender-core-s, from benchmarks/bench_workers.py) and validate's
+  (measured on --full-size-n samples at 640x480) spread over the cores, plus this run's plan, finalize,
+  stats and indexing.
 
 A run interrupted by anything resumes with the same command (render skips complete samples).
 
@@ -124,17 +124,30 @@ def index_splits(root: Path) -> dict[str, int]:
     return {s: len(open_split(root, s, cfg.data, cfg.model_config(), train=s == "train")) for s in SPLITS}
 
 
-def cost_model(phases: dict[str, float], n: int, pixels: int, blender_core_s: float) -> list[dict[str, Any]]:
-    """Hours for n Blender samples at 640x480 on 2, 16, 64 cores: render core-seconds over the cores;
-    plan as measured (its sampling is parallel over the workers, measured here on this run's workers);
-    finalize and indexing as measured (they read JSON, not pixels); stats as measured; validate, which
-    reads every image, scaled by the pixel ratio (an upper bound: its per-file cost does not scale)."""
-    scale = FULL_SIZE[0] * FULL_SIZE[1] / pixels
-    fixed = phases["finalize"] + phases["stats"] + phases["indexing"]
+def full_size_validate_s(out: Path, n: int, seed: int) -> float:
+    """Seconds of one core per sample that validate spends on 640x480 samples (n Mitsuba samples, draft
+    quality, rendered into OUT/full_size): the checks read every pixel, so the cost model uses this."""
+    data = out / "full_size"
+    job = RenderJob(
+        out=data, n=n, seed=seed, backend="mitsuba", quality="draft", resolution=FULL_SIZE, workers=2
+    )
+    run_render(job, progress=False)
+    t0 = time.perf_counter()
+    validate_dataset(data, progress=False, workers=1)
+    return (time.perf_counter() - t0) / n
+
+
+def cost_model(phases: dict[str, float], n: int, workers: int, validate_core_s: float,
+               blender_core_s: float) -> list[dict[str, Any]]:  # fmt: skip
+    """Hours for n Blender samples at 640x480 on 2, 16 and 64 cores. Render and validate: core-seconds
+    per sample (blender_core_s, validate_core_s) spread over the cores; plan: this run's time on its
+    `workers`, spread over the cores (it samples every SceneSpec in parallel); finalize, stats and
+    indexing: this run's times, on one core (they read JSON and CSV, not pixels)."""
+    serial_s = phases["finalize"] + phases["stats"] + phases["indexing"]
     rows = []
     for cores in (2, 16, 64):
         render_h = n * blender_core_s / cores / 3600
-        other_h = (phases["plan"] + fixed + phases["validate"] * scale) / 3600
+        other_h = (phases["plan"] * workers / cores + n * validate_core_s / cores + serial_s) / 3600
         rows.append({"cores": cores, "render_h": render_h, "other_h": other_h, "total_h": render_h + other_h})
     return rows
 
@@ -147,6 +160,7 @@ def main() -> None:
     ap.add_argument("--resolution", default="64x48")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--full-size-n", type=int, default=24, help="640x480 samples to time validate on [24]")
     ap.add_argument(
         "--blender-core-s",
         type=float,
@@ -174,6 +188,7 @@ def main() -> None:
         trace, "validate", lambda: validate_dataset(data, workers=args.workers)
     )
     index_s, instances = timed(trace, "indexing", lambda: index_splits(data))
+    validate_core_s = full_size_validate_s(args.out, args.full_size_n, args.seed)
     trace.stop()
     trace.write_csv(args.out / "full_count_rss.csv")
 
@@ -202,7 +217,10 @@ def main() -> None:
         "bytes_per_sample_total": sum(kinds.values()) / args.n,
         "validate": {"samples": checked, "problems": len(problems), "first": problems[:5]},
         "instances": instances,
-        "cost_model_blender_640x480": cost_model(phases, args.n, w * h, args.blender_core_s),
+        "validate_core_s_640x480": validate_core_s,
+        "cost_model_blender_640x480": cost_model(
+            phases, args.n, args.workers, validate_core_s, args.blender_core_s
+        ),
     }
     (args.out / "full_count.json").write_text(json.dumps(report, indent=1))
 
@@ -227,7 +245,10 @@ def main() -> None:
         + ")"
     )
     print(f"validate: {checked} samples, {len(problems)} problem(s); indexing: {instances}")
-    print(f"cost model, {args.n} Blender samples at 640x480 ({args.blender_core_s:.2f} core-s each):")
+    print(
+        f"cost model, {args.n} Blender samples at 640x480 ({args.blender_core_s:.2f} core-s each to render, "
+        f"{1000 * validate_core_s:.0f} core-ms to validate):"
+    )
     for r in report["cost_model_blender_640x480"]:
         print(
             f"  {r['cores']:>3} cores: render {r['render_h']:.1f} h + the rest {r['other_h']:.2f} h"
