@@ -188,6 +188,7 @@ def main() -> None:
         trace, "validate", lambda: validate_dataset(data, workers=args.workers)
     )
     index_s, instances = timed(trace, "indexing", lambda: index_splits(data))
+    trace.phase = "640x480 validate timing"
     validate_core_s = full_size_validate_s(args.out, args.full_size_n, args.seed)
     trace.stop()
     trace.write_csv(args.out / "full_count_rss.csv")
