@@ -18,7 +18,7 @@ import numpy as np
 import trimesh
 
 from scgen.annotate import annotate
-from scgen.dataset.layout import Layout
+from scgen.dataset.layout import DATASET_FILES, Layout, bytes_by_kind
 from scgen.dataset.splits import plan_splits
 from scgen.dataset.validate import reprojection_error
 from scgen.dataset.writer import WriteOptions, finalize, write_sample
@@ -122,16 +122,8 @@ def full_size(n: int, quality: str, out: Path) -> None:
     print(f"Mitsuba ({backend.variant}, {quality}, 640x480), {n} samples")
     print(f"  images/s: {n / total:.2f}   render {t_render / n:.3f} s/img")
     print(f"  time outside the renderer (annotation + writing): {100 * t_other / total:.1f} %")
-    sizes: dict[str, int] = defaultdict(int)
-    static = 0  # written once per dataset: models, models_eval, camera, config, test targets
-    for p in out.rglob("*"):
-        if not p.is_file():
-            continue
-        if p.parent == out or p.relative_to(out).parts[0] in ("models", "models_eval"):
-            static += p.stat().st_size
-            continue
-        kinds = ("rgb", "depth", "mask", "mask_visib", "xyz", "records")
-        sizes[p.parent.name if p.parent.name in kinds else "json/meta"] += p.stat().st_size
+    sizes = bytes_by_kind(out)
+    static = sizes.pop(DATASET_FILES)  # models, models_eval, camera, config, test targets, metadata
     print(f"  files written once per dataset: {static / 2**20:.1f} MB")
     print("  bytes per sample by file kind:")
     for kind, b in sorted(sizes.items()):

@@ -24,7 +24,6 @@ import argparse
 import contextlib
 import csv
 import json
-import os
 import threading
 import time
 from collections import defaultdict
@@ -36,6 +35,7 @@ import psutil
 
 from posenet.config import load_config
 from posenet.data import open_split
+from scgen.dataset.layout import bytes_by_kind
 from scgen.dataset.splits import SPLITS
 from scgen.dataset.stats import compute_stats, format_table
 from scgen.dataset.validate import validate_dataset
@@ -100,22 +100,6 @@ def timed(trace: RssTrace, phase: str, fn: Callable[[], Any]) -> tuple[float, An
     t0 = time.perf_counter()
     result = fn()
     return time.perf_counter() - t0, result
-
-
-def bytes_by_kind(root: Path) -> dict[str, int]:
-    """Bytes on disk under `root` by file kind: rgb, mask, mask_visib, xyz, depth, bop json, other."""
-    kinds: dict[str, int] = defaultdict(int)
-    for dirpath, _, names in os.walk(root):
-        folder = Path(dirpath).name
-        for name in names:
-            size = os.path.getsize(os.path.join(dirpath, name))
-            if folder in ("rgb", "gray", "mask", "mask_visib", "xyz", "depth"):
-                kinds[folder] += size
-            elif name.startswith("scene_") and name.endswith(".json"):
-                kinds["bop json"] += size
-            else:
-                kinds["other (records, metadata, models)"] += size
-    return dict(kinds)
 
 
 def index_splits(root: Path) -> dict[str, int]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from collections import defaultdict
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -74,6 +75,23 @@ class Layout:
 
     def record_paths(self) -> Iterator[Path]:
         yield from sorted(self.root.glob("*/[0-9]*/records/[0-9]*.json"))
+
+
+DATASET_FILES = "dataset files"  # bytes_by_kind's kind of the root's files, models/ and models_eval/
+
+
+def bytes_by_kind(root: str | Path) -> dict[str, int]:
+    """Bytes on disk under a dataset folder by kind: each per-sample folder of the chunks (rgb, mask,
+    mask_visib, xyz, depth, records, ...), the chunks' own BOP JSON files ("scene json"), and the files
+    of the dataset as a whole (DATASET_FILES: at the root, models/, models_eval/)."""
+    root = Path(root)
+    kinds: dict[str, int] = defaultdict(int)
+    for path in root.rglob("*"):
+        if path.is_file():
+            parts = path.relative_to(root).parts  # split / chunk / folder / file for a sample's file
+            kind = parts[2] if len(parts) == 4 else "scene json" if len(parts) == 3 else DATASET_FILES
+            kinds[kind] += path.stat().st_size
+    return dict(kinds)
 
 
 def dumps(obj: Any) -> str:
