@@ -2,8 +2,12 @@
 kernels each sample launches and compiles; then, at 640x480, throughput, time outside the renderer, bytes
 per sample by file kind and the float16-vs-float32 xyz storage error.
 
-Each size renders in a fresh worker process, as `scgen render` runs it (scgen.run.parent_watch.spawn_pool).
-Usage: python benchmarks/bench_mitsuba.py [--n 30] [--sizes 64x48,320x240] [--full-n 30] [--out DIR]
+Each size renders in a fresh worker process, as `scgen render` runs it (scgen.run.parent_watch.spawn_pool),
+with --threads renderer threads: a worker of `scgen render --workers W` on C cores has C // W. With more than
+one, Dr.Jit's idle pool threads busy-wait for a while after each kernel before they sleep, on cores the
+worker's own numpy work (backgrounds, the camera stage) then shares.
+Usage: python benchmarks/bench_mitsuba.py [--n 30] [--sizes 64x48,320x240] [--threads N] [--full-n 30]
+       [--out DIR]
 """
 
 from __future__ import annotations
@@ -31,13 +35,13 @@ from scgen.scenes.factors import spec_key
 from scgen.scenes.model import load_target
 
 
-def time_size(size: tuple[int, int], n: int, quality: str, seed: int) -> dict:
+def time_size(size: tuple[int, int], n: int, quality: str, seed: int, threads: int | None) -> dict:
     """In a worker: samples 1..n of `seed` at `size` after sample 0 (a warm-up); per sample the seconds
     of the render and of the annotation, CPU seconds, kernel launches and kernels compiled."""
     import drjit as dr
 
     model = load_target()
-    backend = create_backend("mitsuba", model, quality=quality)
+    backend = create_backend("mitsuba", model, quality=quality, threads=threads)
     generator = Generator(model, load_config(resolution=size), seed)
     backend.render(generator.scene(0))
     dr.set_flag(dr.JitFlag.KernelHistory, True)
@@ -55,18 +59,20 @@ def time_size(size: tuple[int, int], n: int, quality: str, seed: int) -> dict:
         history = dr.kernel_history()
         out["launches"].append(len(history))
         out["compiled"].append(sum(1 for k in history if k.get("cache_hit") == 0))
-    return {"variant": backend.variant, "spp": backend.spp, **out}
+    return {"variant": backend.variant, "spp": backend.spp, "threads": dr.thread_count(), **out}
 
 
-def side_by_side(sizes: list[tuple[int, int]], n: int, quality: str, seed: int) -> None:
+def side_by_side(sizes: list[tuple[int, int]], n: int, quality: str, seed: int, threads: int | None) -> None:
     """The per-sample figures of each size, one column each, and the fixed part of a straight-line fit."""
     results = []
     for size in sizes:
         with spawn_pool(1) as pool:
-            results.append(pool.submit(time_size, size, n, quality, seed).result())
+            results.append(pool.submit(time_size, size, n, quality, seed, threads).result())
     r0 = results[0]
-    print(f"Mitsuba ({r0['variant']}, {quality}, {r0['spp']} spp), seed {seed}: samples 1-{n} after a")
-    print("warm-up, each size in a fresh worker process")
+    print(
+        f"Mitsuba ({r0['variant']}, {quality}, {r0['spp']} spp, {r0['threads']} renderer thread(s)), seed "
+        f"{seed}: samples 1-{n} after a warm-up, each size in a fresh worker process"
+    )
     print(f"  {'per sample':<30s}" + "".join(f"{f'{w}x{h}':>12s}" for w, h in sizes))
     rows = [
         ("render, median ms", lambda r: 1000 * np.median(r["render"])),
@@ -143,10 +149,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--full-n", type=int, default=30, help="samples at 640x480 (0: skip)")
     ap.add_argument("--quality", default="default")
+    ap.add_argument("--threads", type=int, default=None, help="renderer threads per worker [all cores]")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     sizes = [(int(w), int(h)) for w, h in (s.split("x") for s in args.sizes.split(","))]
-    side_by_side(sizes, args.n, args.quality, args.seed)
+    side_by_side(sizes, args.n, args.quality, args.seed, args.threads)
     if args.full_n:
         full_size(args.full_n, args.quality, args.out or Path(tempfile.mkdtemp()) / "bench")
 

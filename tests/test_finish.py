@@ -12,6 +12,7 @@ from scgen.dataset.stats import compute_stats
 from scgen.generator import Generator
 from scgen.render.backgrounds import srgb_to_linear
 from scgen.render.buffers import BACKGROUND_ID
+from scgen.render.mitsuba_materials import CRINKLE_SLOPE, crinkle_normal_map, crinkle_normal_tensor
 from scgen.run.runner import RenderJob, run_render
 from scgen.scenes import load_config
 from scgen.scenes.finish import finish_group, finished, sample_finish
@@ -68,6 +69,21 @@ def test_varied_finish_changes_the_target_and_nothing_else():
             assert np.array_equal(a.buffers.rgb[sky], b.buffers.rgb[sky])  # the background as it was
             changed += int(np.abs(a.buffers.rgb[target].astype(int) - b.buffers.rgb[target]).mean() > 2)
         assert changed >= 2
+
+
+def test_a_reused_mitsuba_bsdf_renders_what_a_new_one_would():
+    """Mitsuba's target BSDFs are kept from sample to sample and set to each sample's finish in place
+    (mitsuba_materials.TargetFinishes): sample 2 rendered after samples 0 and 1 equals sample 2 rendered
+    by a fresh backend, whose BSDFs are built for it; the crinkle maps set in place come from one Dr.Jit
+    kernel, bit for bit numpy's."""
+    with generator({"swap_prob": 0.5}) as g:
+        reused = [g.sample(i).buffers.rgb for i in range(3)][2]
+    with generator({"swap_prob": 0.5}) as g:
+        fresh = g.sample(2).buffers.rgb
+    assert np.array_equal(reused, fresh)
+    for slope in (0.0, 0.0137, CRINKLE_SLOPE, 0.05):
+        tensor = np.asarray(crinkle_normal_tensor(slope))
+        assert np.array_equal(tensor.view(np.uint32), crinkle_normal_map(slope).view(np.uint32)), slope
 
 
 def test_blender_and_mitsuba_render_the_same_draws():
