@@ -56,14 +56,12 @@ def crinkle_normal_tensor(slope: float) -> mi.TensorXf:
     if not dr.is_jit_v(mi.Float):
         return mi.TensorXf(crinkle_normal_map(slope))
     gx, gy = _crinkle_gradient_jit()
-    channels = _normal_channels(gx, gy, dr.opaque(mi.Float64, slope), dr.sqrt)
-    n = dr.width(gx)
-    out = dr.empty(mi.Float, 3 * n)
-    corner = 3 * dr.arange(mi.UInt32, n)
-    for k, c in enumerate(channels):
-        dr.scatter(out, mi.Float(c), corner + k)
-    side = _crinkle_gradient()[0].shape[0]
-    return mi.TensorXf(out, shape=(side, side, 3))
+    entry = dr.arange(mi.UInt32, 3 * dr.width(gx))  # the map's values in memory order: pixel, channel
+    pixel, channel = entry // 3, entry % 3
+    x, y, z = _normal_channels(dr.gather(mi.Float64, gx, pixel), dr.gather(mi.Float64, gy, pixel),
+                               dr.opaque(mi.Float64, slope), dr.sqrt)  # fmt: skip
+    values = mi.Float(dr.select(channel == 0, x, dr.select(channel == 1, y, z)))
+    return mi.TensorXf(values, shape=_crinkle_gradient()[0].shape + (3,))
 
 
 @functools.cache
