@@ -58,6 +58,8 @@ from scgen.errors import ScgenError
 from scgen.run.runner import RenderJob, run_render
 
 CURVE_POINTS = 8  # default number of evaluations over the run
+# the benchmark's dataset (each a --flag's default): 1000 samples of seed 7 at 320x240, Mitsuba, 2 workers
+RENDER_N, SEED, RESOLUTION, BACKEND, WORKERS = 1000, 7, (320, 240), "mitsuba", 2
 # issue 20's floors for the CPU recipe: (split, figure, bound, "max" | "min")
 FLOORS = (
     ("test", "re_deg_median", 20.0, "max"),
@@ -96,16 +98,20 @@ def parse_args() -> argparse.Namespace:
         "--data", type=Path, default=None, help="Existing scgen dataset (default: render one into OUT/data)."
     )
     render = ap.add_argument_group("rendering (only without --data)")
-    render.add_argument("--render-n", type=positive, default=1000, help="Samples to render [1000].")
-    render.add_argument("--seed", type=int, default=7, help="Dataset seed [7].")
     render.add_argument(
-        "--resolution", type=parse_resolution, default=(320, 240), help="Image size WxH [320x240]."
+        "--render-n", type=positive, default=RENDER_N, help="Samples to render [%(default)s]."
     )
-    render.add_argument("--backend", default="mitsuba", help="scgen backend: mitsuba | blender [mitsuba].")
+    render.add_argument("--seed", type=int, default=SEED, help="Dataset seed [%(default)s].")
+    render.add_argument(
+        "--resolution", type=parse_resolution, default=RESOLUTION, help="Image size WxH [320x240]."
+    )
+    render.add_argument("--backend", default=BACKEND, help="scgen backend: mitsuba | blender [%(default)s].")
     render.add_argument(
         "--quality", default="default", help="scgen quality: draft | default | high [default]."
     )
-    render.add_argument("--workers", type=positive, default=2, help="Render worker processes [2].")
+    render.add_argument(
+        "--workers", type=positive, default=WORKERS, help="Render worker processes [%(default)s]."
+    )
     train_g = ap.add_argument_group("training")
     train_g.add_argument("--config", default="smoke", help="paper | smoke | a YAML/TOML config file [smoke].")
     train_g.add_argument(

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from posenet_learning import BACKEND, RENDER_N, RESOLUTION, SEED, WORKERS
 
 from posenet.evaluate import evaluate, format_table
 from posenet.losses import LOSS_TERMS
@@ -79,8 +80,8 @@ def dataset(folder: Path | None, out: Path, camera: str) -> Path:
     """`folder`, or the learning benchmark's set rendered through `camera` into OUT/data-CAMERA."""
     if folder is not None:
         return folder
-    job = RenderJob(out=out / f"data-{camera}", n=1000, seed=7, backend="mitsuba", camera=camera,
-                    resolution=(320, 240), workers=2)  # fmt: skip
+    job = RenderJob(out=out / f"data-{camera}", n=RENDER_N, seed=SEED, backend=BACKEND, camera=camera,
+                    resolution=RESOLUTION, workers=WORKERS)  # fmt: skip
     run_render(job, progress=True)
     return job.out
 
