@@ -4,11 +4,12 @@ RGB comes from Mitsuba's path tracer; the geometric passes (depth, instance ids,
 the target-alone depth, shadow rays) come from exact ray casts through pixel centres, so no
 filtered or jittered sample ever blends two surfaces at an edge.
 
-Per sample one scene holds the target (one mesh per material class) and the props, for the path tracer
-and the ray casts alike. Dr.Jit traces every live shape, BSDF and light into each kernel and compiles a
-kernel anew for each new set of them or of the constants they bake in (LLVM: about 0.3 s at any image
-size), so that set is kept steady from sample to sample: see _steady_shapes, _steady_light_bounds and
-mitsuba_materials.TargetFinishes.
+A worker keeps one scene (per camera, with or without the Earth's light) for its whole run and refills it
+every sample: the target's triangles go into one mesh per finish BSDF, the props' into one mesh per
+material class (mitsuba_slots), and the lights take the sample's direction and irradiance. Then the render
+replays a frozen recording (drjit.freeze) instead of tracing the path tracer through every live BSDF
+again (about 20 ms a sample at any image size); it records again only when the set of meshes, BSDFs or
+lights grows, a mesh outgrows its capacity, or the lights' bounding sphere changes.
 """
 
 from __future__ import annotations
@@ -27,13 +28,16 @@ from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_llvm import mitsuba_setup
 from scgen.render.mitsuba_materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
+from scgen.render.mitsuba_slots import MeshSlot, build_mesh
 from scgen.render.props import prop_mesh
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
 QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
 GUARD_M = 1e4  # half the span of the guard triangle (see MitsubaBackend.__init__)
-MIN_PROP_SLOTS = 12  # live meshes kept for props from the start (the default config draws at most 9)
+PROP_SLOT_TRIANGLES = 1024  # a material's prop mesh holds this many triangles at first (it grows if need be)
+RECORDINGS_KEPT = 32  # frozen renders a backend keeps, the least recently used dropped first
+LIGHT_KEYS = ("irradiance.value", "to_world")  # what a directional light takes from each sample
 
 
 def select_variant() -> str:
@@ -44,19 +48,15 @@ def select_variant() -> str:
     return mi.variant()
 
 
-def _mesh(name: str, corners: np.ndarray, uv: np.ndarray, bsdf: mi.BSDF) -> mi.Mesh:
-    """A Mitsuba mesh of unwelded triangles: `corners` (3F x 3) and `uv` (3F x 2) hold three per face, in
-    face order, as box_uv lays them out."""
-    props = mi.Properties()
-    props["bsdf"] = bsdf
-    n = len(corners)
-    m = mi.Mesh(name, n, n // 3, props=props, has_vertex_normals=False, has_vertex_texcoords=True)
-    params = mi.traverse(m)
-    params["vertex_positions"] = dr.ravel(mi.TensorXf(corners.astype(np.float32)))
-    params["faces"] = dr.ravel(mi.TensorXu(np.arange(n, dtype=np.uint32)))
-    params["vertex_texcoords"] = dr.ravel(mi.TensorXf(uv.astype(np.float32)))
-    params.update()
-    return m
+class SampleMeshes:
+    """Where a sample's shapes went: the target's meshes (one per part class, in the model's class order)
+    and the props' (one per material with any), with the prop each of their triangles belongs to."""
+
+    def __init__(self) -> None:
+        self.target: list[mi.Mesh] = []
+        self.props: list[mi.Mesh] = []
+        self.owners: list[np.ndarray] = []  # per prop mesh: index into SceneSpec.props, per triangle
+        self.extent = 0.0  # the largest |coordinate| of any corner (metres, camera frame)
 
 
 class MitsubaBackend:
@@ -78,37 +78,66 @@ class MitsubaBackend:
         self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
         self._finishes = TargetFinishes()
         self._reach = 1.01 * float(np.linalg.norm(model.mesh.vertices, axis=1).max())  # target's radius
-        self._most_props = MIN_PROP_SLOTS  # the most props a sample had so far, at least this
-        self._spares: list[mi.Mesh] = []  # see _steady_shapes
+        # the target's slots, one per BSDF it is drawn with (named as TargetFinishes names them, or by the
+        # nominal class), each large enough for the largest part class; the props', one per material class
+        self._target_slots: dict[str, MeshSlot] = {}
+        self._target_capacity = max(
+            sum(len(model.parts[k][1].faces) for k in ks) for ks in self._classes.values()
+        )
+        self._prop_slots = {m: MeshSlot(f"props_{m}", b, PROP_SLOT_TRIANGLES) for m, b in self.bsdfs.items()}
         # one triangle of no area, never hit, whose box spans 20 km: beside it Embree finds no spatial
         # split worth making, and builds the target's BVH in 8 ms instead of 19 (labels are the same)
         far = GUARD_M * np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [1.0, 1.0, -1.0]])
-        self._guard = _mesh("guard", far, np.zeros((3, 2)), self.bsdfs["white_paint"])
+        self._guard = build_mesh("guard", far, np.zeros((3, 2)), self.bsdfs["white_paint"])
+        # the path tracer's scenes, by (camera, with the Earth's light), with their lights' parameters
+        self._scenes: dict[tuple, tuple[mi.Scene, mi.SceneParameters]] = {}
+        # this backend's own recordings: they hold the addresses of its meshes' buffers, which another
+        # backend's meshes in the same layout would not have
+        self._frozen_render = dr.freeze(_render_scene, limit=RECORDINGS_KEPT, warn_after=2**31 - 1)
 
     def close(self) -> None:
         pass
 
-    def _shapes(self, spec: SceneSpec, shaded: bool = True) -> tuple[list[mi.Mesh], list[mi.Mesh]]:
-        """Mitsuba meshes in the camera frame: the target's, one per material class (its parts, in model
-        order), and one per prop. `shaded`: with the sample's finish (else the nominal BSDFs)."""
+    def _fill(self, spec: SceneSpec, shaded: bool = True) -> SampleMeshes:
+        """Put the sample's target and props, in the camera frame, into their slots. `shaded`: the target
+        with the sample's finish (else the nominal BSDFs)."""
         T = spec.target.matrix
         finish = {cls: f for cls, f in spec.finish.items() if cls in self._classes} if shaded else {}
-        bsdfs = {**self.bsdfs, **self._finishes.bsdfs(finish)}
-        target = []
+        drawn_with = self._finishes.bsdfs(finish)
+        layout, filled = SampleMeshes(), set()
         for cls, parts in self._classes.items():
+            name, bsdf = drawn_with.get(cls, (cls, self.bsdfs[cls]))
+            if name not in self._target_slots:
+                self._target_slots[name] = MeshSlot(f"target_{name}", bsdf, self._target_capacity)
+                self._scenes.clear()  # a new mesh: every scene is rebuilt with it
             drawn = spec.finish[cls]["material"] if cls in spec.finish else cls
-            corners = [transform_points(mesh.vertices, T)[mesh.faces].reshape(-1, 3)
-                       for mesh in (self.model.parts[k][1] for k in parts)]  # fmt: skip
+            corners = np.concatenate([transform_points(mesh.vertices, T)[mesh.faces].reshape(-1, 3)
+                                      for mesh in (self.model.parts[k][1] for k in parts)])  # fmt: skip
             uv = np.concatenate([self._part_uv(k, drawn) for k in parts])
-            target.append(_mesh(f"target_{cls}", np.concatenate(corners), uv, bsdfs[cls]))
-        props = []
+            slot = self._target_slots[name]
+            slot.fill(corners, uv)
+            filled.add(name)
+            layout.target.append(slot.mesh)
+            layout.extent = max(layout.extent, float(np.abs(corners.astype(np.float32)).max()))
+        for name, slot in self._target_slots.items():
+            if name not in filled:
+                slot.fill(np.zeros((0, 3)), np.zeros((0, 2)))
+        by_material: dict[str, list[tuple[int, np.ndarray, np.ndarray]]] = {}
         for k, prop in enumerate(spec.props):
             m = prop_mesh(prop)
             local = (np.asarray(m.vertices) - prop.pose.t_vec) @ prop.pose.R_mat  # UVs stick to the prop
             uv = box_uv(local, np.asarray(m.faces), texture_scale(prop.material, max(prop.size)))
             corners = np.asarray(m.vertices)[np.asarray(m.faces)].reshape(-1, 3)
-            props.append(_mesh(f"prop{k}", corners, uv, self.bsdfs[prop.material]))
-        return target, props
+            by_material.setdefault(prop.material, []).append((k, corners, uv))
+            layout.extent = max(layout.extent, float(np.abs(corners.astype(np.float32)).max()))
+        for material, slot in self._prop_slots.items():
+            pieces = by_material.get(material, [])
+            slot.fill(np.concatenate([c for _, c, _ in pieces] or [np.zeros((0, 3))]),
+                      np.concatenate([uv for _, _, uv in pieces] or [np.zeros((0, 2))]))  # fmt: skip
+            if pieces:
+                layout.props.append(slot.mesh)
+                layout.owners.append(np.concatenate([np.full(len(c) // 3, k) for k, c, _ in pieces]))
+        return layout
 
     def _part_uv(self, k: int, material: str) -> np.ndarray:
         """Target part k's UVs, scaled for the material class it is rendered with."""
@@ -119,61 +148,49 @@ class MitsubaBackend:
         return self._uv[k, material]
 
     def render(self, spec: SceneSpec) -> Buffers:
-        self._steady_shapes(len(spec.props))
-        target, props = self._shapes(spec)
-        scene = self._scene(spec, target + props)
-        buffers = self._passes(spec, scene, target, props)
-        buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, scene), buffers.instance)
+        layout = self._fill(spec)
+        scene = self._scene(spec, layout)
+        buffers = self._passes(spec, scene, layout)
+        buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, scene, layout), buffers.instance)
         return buffers
 
     def render_geometry(self, spec: SceneSpec) -> Buffers:
         """Only the exact geometric passes (RGB left black): labels at a fraction of the cost."""
-        self._steady_shapes(len(spec.props))
-        target, props = self._shapes(spec, shaded=False)
-        return self._passes(spec, self._scene_of(target + props), target, props)
+        layout = self._fill(spec, shaded=False)
+        return self._passes(spec, self._scene_of(layout.target + layout.props), layout)
 
-    def _steady_shapes(self, n_props: int) -> None:
-        """Keep the count of live shapes at the target's plus the most props seen (MIN_PROP_SLOTS at
-        least), with spare meshes in no scene: Dr.Jit lays out every live shape's data in each kernel that
-        calls into shapes (ray casts, the path tracer), so each new count of props compiled new kernels.
-        A spare adds about 0.13 ms to a render."""
-        self._most_props = max(self._most_props, n_props)
-        del self._spares[self._most_props - n_props :]
-        while len(self._spares) < self._most_props - n_props:
-            self._spares.append(_mesh("spare", np.zeros((3, 3)), np.zeros((3, 2)), self.bsdfs["white_paint"]))
-
-    def _passes(
-        self, spec: SceneSpec, scene: mi.Scene, target: list[mi.Mesh], props: list[mi.Mesh]
-    ) -> Buffers:
-        """The exact geometric passes of `scene` (holding `target` and `props`): one ray per pixel centre.
+    def _passes(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> Buffers:
+        """The exact geometric passes of `scene` (holding `layout`'s meshes): one ray per pixel centre.
 
         The target-alone depth equals the depth wherever the target is hit first; only the rays that hit
         a prop no farther than the target's bounding sphere reaches are cast again, through the target alone.
         """
         W, H = spec.camera.width, spec.camera.height
         rays_cam = spec.camera.pixel_directions().reshape(-1, 3)
-        t_all, idx_all, normal = cast_rays(scene, target + props, rays_cam)
-        n_target = len(target)
+        t_all, idx_all, normal, prim = cast_rays(scene, layout.target + layout.props, rays_cam)
+        n_target = len(layout.target)
         hit = idx_all >= 0
         on_target = hit & (idx_all < n_target)
         on_prop = hit & ~on_target
         t_tgt = np.where(on_target, t_all, np.inf)
         behind = on_prop & self._may_reach_target(spec, rays_cam, t_all)
         if behind.any():
-            t_tgt[behind] = cast_rays(self._scene_of(target), [], rays_cam[behind])[0]
+            t_tgt[behind] = cast_rays(self._scene_of(layout.target), [], rays_cam[behind])[0]
         z_scale = rays_cam[:, 2]
         depth = np.where(np.isfinite(t_all), t_all * z_scale, 0.0).reshape(H, W).astype(np.float32)
         target_depth = np.where(np.isfinite(t_tgt), t_tgt * z_scale, 0.0).reshape(H, W).astype(np.float32)
         instance = np.full(H * W, BACKGROUND_ID, np.int32)
         instance[on_target] = TARGET_ID
-        instance[on_prop] = 2 + (idx_all[on_prop] - n_target)
+        for j, owners in enumerate(layout.owners):
+            on_mesh = idx_all == n_target + j
+            instance[on_mesh] = 2 + owners[prim[on_mesh]]
         normal = np.where((np.sum(normal * rays_cam, axis=1) > 0)[:, None], -normal, normal)
 
         sun = np.asarray(spec.sun.direction, np.float64)
         sun_blocked = np.zeros(H * W, bool)
-        if props and on_target.any():
+        if layout.props and on_target.any():
             origins = rays_cam[on_target] * t_all[on_target, None] + 1e-4 * normal[on_target]
-            sun_blocked[on_target] = _occluded(self._scene_of(props), origins, sun)
+            sun_blocked[on_target] = _occluded(self._scene_of(layout.props), origins, sun)
 
         return Buffers(
             rgb=np.zeros((H, W, 3), np.uint8),
@@ -197,75 +214,124 @@ class MitsubaBackend:
         gap2 = centre @ centre - along**2  # squared distance from the sphere's centre to the ray's line
         return (gap2 <= self._reach**2) & (t <= along + np.sqrt(np.maximum(self._reach**2 - gap2, 0.0)))
 
-    def _scene(self, spec: SceneSpec, shapes: list[mi.Mesh]) -> mi.Scene:
-        """The path tracer's scene: `shapes`, the sun (and earthshine), the render camera
-        (scgen.render.camera.lens) and its film."""
-        cam = render_camera(spec.camera)
-        K = cam.K_mat
-        d: dict = {
-            "type": "scene",
-            "integrator": {"type": "path", "max_depth": 4},
-            "sensor": {
-                "type": "perspective",
-                "fov": float(np.degrees(2 * np.arctan(cam.width / (2 * K[0, 0])))),
-                "fov_axis": "x",
-                "principal_point_offset_x": ((cam.width - 1) / 2 - K[0, 2]) / cam.width,
-                "principal_point_offset_y": ((cam.height - 1) / 2 - K[1, 2]) / cam.height,
-                "near_clip": CLIP_START_M,
-                "far_clip": CLIP_END_M,
-                "to_world": mi.ScalarTransform4f().scale([-1, -1, 1]),
-                "film": {
-                    "type": "hdrfilm",
-                    "width": cam.width,
-                    "height": cam.height,
-                    "pixel_format": "rgba",
-                    "rfilter": {"type": "gaussian"},
-                },
-                "sampler": {"type": "independent", "sample_count": self.spp},
-            },
-            "sun": {
-                "type": "directional",
-                "direction": [-float(x) for x in spec.sun.direction],
-                "irradiance": {"type": "rgb", "value": sun_render_irradiance(spec)},
-            },
-        }
-        albedo = earth_albedo_light(spec)
-        if albedo is not None:
-            direction, irradiance = albedo
-            d["earthshine"] = {
-                "type": "directional",
-                "direction": [-float(x) for x in direction],
-                "irradiance": {"type": "rgb", "value": [c * irradiance for c in EARTHSHINE_COLOUR]},
-            }
-        for k, s in enumerate([*shapes, self._guard]):
-            d[f"s{k:03d}"] = s
-        scene = mi.load_dict(d)
-        _steady_light_bounds(scene, shapes)
+    def _scene(self, spec: SceneSpec, layout: SampleMeshes) -> mi.Scene:
+        """The path tracer's scene, holding every slot (filled for `spec`), the sun (and earthshine), the
+        render camera (scgen.render.camera.lens) and its film: built once per camera and Earth's light,
+        then given each sample's lights; its BVH is rebuilt for the refilled meshes."""
+        lights, camera = _lights(spec), render_camera(spec.camera)
+        key = (camera, tuple(lights))
+        if key not in self._scenes:
+            shapes = [*self._target_slots.values(), *self._prop_slots.values()]
+            sensor = _sensor(camera, self.spp)
+            d = {"type": "scene", "integrator": {"type": "path", "max_depth": 4}, "sensor": sensor, **lights}
+            d.update({f"s{k:03d}": slot.mesh for k, slot in enumerate(shapes)}, guard=self._guard)
+            scene = mi.load_dict(d)
+            params = mi.traverse(scene)
+            params.keep([f"{name}.{key}" for name in lights for key in LIGHT_KEYS])
+            self._scenes[key] = scene, params
+        else:
+            scene, params = self._scenes[key]
+            for name, light in lights.items():
+                new = mi.traverse(mi.load_dict(light))
+                for k in LIGHT_KEYS:
+                    params[f"{name}.{k}"] = new[k]
+            params.update()
+            scene.parameters_changed([])
+        _steady_light_bounds(scene, layout.extent)
         return scene
 
-    def _shade(self, spec: SceneSpec, scene: mi.Scene) -> np.ndarray:
+    def _shade(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> np.ndarray:
         """The linear composite over the background, on the render camera (scgen.render.camera.lens)."""
-        img = np.asarray(mi.render(scene, seed=render_seed(spec)), dtype=np.float32)
+        img = np.asarray(self._render(spec, scene, layout), dtype=np.float32)
         fg, alpha = img[..., :3], img[..., 3:4]
         background = background_image(replace(spec, camera=render_camera(spec.camera)))
         return fg + (1.0 - np.clip(alpha, 0, 1)) * background
 
+    def _render(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> mi.TensorXf:
+        """mi.render of `scene`, replayed from a frozen recording in a JIT variant. Its inputs name every
+        live object the recorded kernels call into (the other scenes' lights too) and, as plain values,
+        what the recording bakes in: the lights' bounding sphere and the meshes' capacities."""
+        if not dr.is_jit_v(mi.Float):
+            return mi.render(scene, seed=render_seed(spec))
+        others = [e for other, _ in self._scenes.values() if other is not scene for e in other.emitters()]
+        capacities = tuple(s.capacity for s in [*self._target_slots.values(), *self._prop_slots.values()])
+        seed = dr.opaque(mi.UInt32, render_seed(spec))
+        return self._frozen_render(scene, seed, _light_radius(layout.extent), capacities, others)
 
-def _steady_light_bounds(scene: mi.Scene, shapes: list[mi.Mesh]) -> None:
-    """Give the directional lights a bounding sphere about the camera whose radius is the power of two that
-    encloses the scene: they keep their scene's sphere as constants of the render kernel, so the scene's
-    own sphere compiled a new kernel for every sample."""
-    corners = [np.asarray(c) for s in shapes for c in (s.bbox().min, s.bbox().max)]
-    extent = float(np.abs(corners).max())
-    half = 2.0 ** np.ceil(np.log2(max(extent, CLIP_START_M)))
+
+def _render_scene(
+    scene: mi.Scene, seed: mi.UInt32, radius: float, capacities: tuple, others: list
+) -> mi.TensorXf:
+    """mi.render, to be frozen: recorded once per distinct set of inputs, replayed after (see
+    MitsubaBackend._render)."""
+    return mi.render(scene, seed=seed)
+
+
+def _sensor(cam, spp: int) -> dict:
+    """The render camera as Mitsuba's perspective sensor, with its film and sampler."""
+    K = cam.K_mat
+    return {
+        "type": "perspective",
+        "fov": float(np.degrees(2 * np.arctan(cam.width / (2 * K[0, 0])))),
+        "fov_axis": "x",
+        "principal_point_offset_x": ((cam.width - 1) / 2 - K[0, 2]) / cam.width,
+        "principal_point_offset_y": ((cam.height - 1) / 2 - K[1, 2]) / cam.height,
+        "near_clip": CLIP_START_M,
+        "far_clip": CLIP_END_M,
+        "to_world": mi.ScalarTransform4f().scale([-1, -1, 1]),
+        "film": {
+            "type": "hdrfilm",
+            "width": cam.width,
+            "height": cam.height,
+            "pixel_format": "rgba",
+            "rfilter": {"type": "gaussian"},
+        },
+        "sampler": {"type": "independent", "sample_count": spp},
+    }
+
+
+def _lights(spec: SceneSpec) -> dict[str, dict]:
+    """The sample's directional lights: the sun, and the Earth's reflected light where it has one."""
+    lights = {
+        "sun": {
+            "type": "directional",
+            "direction": [-float(x) for x in spec.sun.direction],
+            "irradiance": {"type": "rgb", "value": sun_render_irradiance(spec)},
+        }
+    }
+    albedo = earth_albedo_light(spec)
+    if albedo is not None:
+        direction, irradiance = albedo
+        lights["earthshine"] = {
+            "type": "directional",
+            "direction": [-float(x) for x in direction],
+            "irradiance": {"type": "rgb", "value": [c * irradiance for c in EARTHSHINE_COLOUR]},
+        }
+    return lights
+
+
+def _light_radius(extent: float) -> float:
+    """The half side of the cube the lights' bounding sphere encloses: the power of two at least `extent`
+    (the scene's largest |coordinate|), so that it changes seldom."""
+    return float(2.0 ** np.ceil(np.log2(max(extent, CLIP_START_M))))
+
+
+def _steady_light_bounds(scene: mi.Scene, extent: float) -> None:
+    """Give the directional lights a bounding sphere about the camera, that of a cube of half side
+    _light_radius(extent): they keep their scene's sphere as constants of the render kernel, so the scene's
+    own sphere compiled a new kernel for every sample (and a frozen render would replay a stale one)."""
+    half = _light_radius(extent)
     cube = {"type": "cube", "to_world": mi.ScalarTransform4f().scale([half] * 3)}
     bounds = mi.load_dict({"type": "scene", "cube": cube})
     for emitter in scene.emitters():
         emitter.set_scene(bounds)
 
 
-def cast_rays(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ray length, index of the hit shape in `shapes` (-1 = miss) and geometric normal, rays from origin."""
+def cast_rays(
+    scene: mi.Scene, shapes: list, dirs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ray length, index of the hit shape in `shapes` (-1 = miss), geometric normal and index of the hit
+    triangle in its shape, rays from the origin."""
     if not dr.is_jit_v(mi.Float):
         return _cast_rays_one_by_one(scene, shapes, dirs)
     o = mi.Point3f(0.0, 0.0, 0.0)
@@ -281,21 +347,27 @@ def cast_rays(scene: mi.Scene, shapes: list, dirs: np.ndarray) -> tuple[np.ndarr
         lut[ids] = np.arange(len(shapes))
         idx = np.where(valid, lut[hit_ids], -1)
     n = np.stack([np.asarray(si.n.x), np.asarray(si.n.y), np.asarray(si.n.z)], 1).astype(np.float64)
-    return t, idx, np.where(valid[:, None], n, 0.0)
+    return (
+        t,
+        idx,
+        np.where(valid[:, None], n, 0.0),
+        np.where(valid, np.asarray(si.prim_index), 0).astype(np.int64),
+    )
 
 
 def _cast_rays_one_by_one(
     scene: mi.Scene, shapes: list, dirs: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """cast_rays for scalar_rgb (the fallback without a usable libLLVM), whose rays go one at a time."""
     index = {id(s): k for k, s in enumerate(shapes)}
     t, idx, n = np.full(len(dirs), np.inf), np.full(len(dirs), -1, np.int64), np.zeros((len(dirs), 3))
+    prim = np.zeros(len(dirs), np.int64)
     o = mi.Point3f(0.0, 0.0, 0.0)
     for i, d in enumerate(dirs.tolist()):
         si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(d)))
         if si.is_valid():
-            t[i], idx[i], n[i] = si.t, index.get(id(si.shape), -1), si.n
-    return t, idx, n
+            t[i], idx[i], n[i], prim[i] = si.t, index.get(id(si.shape), -1), si.n, si.prim_index
+    return t, idx, n, prim
 
 
 def _registry_id(ptr: mi.ShapePtr) -> np.ndarray:

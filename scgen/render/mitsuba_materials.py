@@ -16,6 +16,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from scgen.render.mitsuba_slots import aligned
 from scgen.scenes.finish import finished
 from scgen.scenes.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
 
@@ -46,7 +47,8 @@ def crinkle_normal_map(slope: float = CRINKLE_SLOPE) -> np.ndarray:
     """A tileable tangent-space normal map (512 x 512 x 3 in [0, 1]) of crumpled foil; `slope` scales
     the height gradient (the crinkle's strength)."""
     gx, gy = _crinkle_gradient()
-    return np.stack([c.astype(np.float32) for c in _normal_channels(gx, gy, slope, np.sqrt)], axis=-1)
+    nx, ny, length = _tilted_normal(gx, gy, slope, np.sqrt)
+    return np.stack([_encoded(c, length).astype(np.float32) for c in (nx, ny, 1.0)], axis=-1)
 
 
 def crinkle_normal_tensor(slope: float) -> mi.TensorXf:
@@ -58,10 +60,10 @@ def crinkle_normal_tensor(slope: float) -> mi.TensorXf:
     gx, gy = _crinkle_gradient_jit()
     entry = dr.arange(mi.UInt32, 3 * dr.width(gx))  # the map's values in memory order: pixel, channel
     pixel, channel = entry // 3, entry % 3
-    x, y, z = _normal_channels(dr.gather(mi.Float64, gx, pixel), dr.gather(mi.Float64, gy, pixel),
-                               dr.opaque(mi.Float64, slope), dr.sqrt)  # fmt: skip
-    values = mi.Float(dr.select(channel == 0, x, dr.select(channel == 1, y, z)))
-    return mi.TensorXf(values, shape=_crinkle_gradient()[0].shape + (3,))
+    nx, ny, length = _tilted_normal(dr.gather(mi.Float64, gx, pixel), dr.gather(mi.Float64, gy, pixel),
+                                    dr.opaque(mi.Float64, slope), dr.sqrt)  # fmt: skip
+    component = dr.select(channel == 0, nx, dr.select(channel == 1, ny, 1.0))  # one division per value
+    return mi.TensorXf(mi.Float(_encoded(component, length)), shape=_crinkle_gradient()[0].shape + (3,))
 
 
 @functools.cache
@@ -70,12 +72,16 @@ def _crinkle_gradient_jit() -> tuple[Any, Any]:
     return tuple(mi.Float64(g.ravel()) for g in _crinkle_gradient())
 
 
-def _normal_channels(gx: Any, gy: Any, slope: Any, sqrt: Any) -> tuple[Any, Any, Any]:
-    """0.5 n + 0.5 of the unit normal n along (-slope gx, -slope gy, 1), channel by channel: one formula
-    for numpy's arrays and Dr.Jit's."""
+def _tilted_normal(gx: Any, gy: Any, slope: Any, sqrt: Any) -> tuple[Any, Any, Any]:
+    """The normal along (-slope gx, -slope gy, 1): its x and y, and its length; one formula for numpy's
+    arrays and Dr.Jit's."""
     nx, ny = gx * -slope, gy * -slope
-    length = sqrt(nx * nx + ny * ny + 1.0)
-    return nx / length * 0.5 + 0.5, ny / length * 0.5 + 0.5, 0.5 / length + 0.5
+    return nx, ny, sqrt(nx * nx + ny * ny + 1.0)
+
+
+def _encoded(component: Any, length: Any) -> Any:
+    """One channel of the map, 0.5 n + 0.5 of the unit normal: a component over the normal's length."""
+    return component / length * 0.5 + 0.5
 
 
 def cell_texture(
@@ -131,8 +137,9 @@ class TargetFinishes:
         # class drawn -> its BSDFs, each with its parameters (traversed once: a traversal costs 0.2 ms)
         self._pools: dict[str, list[tuple[mi.BSDF, mi.SceneParameters]]] = {}
 
-    def bsdfs(self, finish: dict[str, dict]) -> dict[str, mi.BSDF]:
-        """The BSDF of every part class under a sample's finish (scgen.scenes.finish)."""
+    def bsdfs(self, finish: dict[str, dict]) -> dict[str, tuple[str, mi.BSDF]]:
+        """The BSDF of every part class under a sample's finish (scgen.scenes.finish), each with a name
+        that stays its own for good (the class drawn and the BSDF's place in that class's pool)."""
         taken: dict[str, int] = {}
         out = {}
         for part_class in sorted(finish):
@@ -144,7 +151,7 @@ class TargetFinishes:
                 pool.append((bsdf, mi.traverse(bsdf)))
             else:
                 _set_finish(pool[k][1], m)
-            out[part_class] = pool[k][0]
+            out[part_class] = f"{drawn}_{k}", pool[k][0]
         return out
 
 
@@ -153,15 +160,22 @@ def _set_finish(params: mi.SceneParameters, m: Material) -> None:
     new one would."""
     inner = "nested_bsdf." if m.detail == "crinkle" else ""
     if m.detail == "cells":
-        params["base_color.data"] = mi.TensorXf(cell_texture(m.base))
+        params["base_color.data"] = mi.TensorXf(aligned(cell_texture(m.base)))
     else:
-        params[inner + "base_color.value"] = mi.Color3f(*m.base)
-    params[inner + "roughness.value"] = m.roughness
+        params[inner + "base_color.value"] = mi.Color3f(*(_opaque(c) for c in m.base))
+    params[inner + "roughness.value"] = _opaque(m.roughness)
     if m.metallic:  # 0 for every draw of its class; setting it would mark the BSDF metallic for good
-        params[inner + "metallic.value"] = m.metallic
+        params[inner + "metallic.value"] = _opaque(m.metallic)
     if m.detail == "crinkle":
         params["normalmap.data"] = crinkle_normal_tensor(CRINKLE_SLOPE * m.crinkle)
     params.update()
+
+
+def _opaque(value: float) -> mi.Float:
+    """`value` as a Float of its own in memory: a literal would be shared with every equal literal alive,
+    and which parameters share one would then change from sample to sample, and with it the inputs'
+    layout a frozen render is replayed by (mitsuba_backend)."""
+    return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else value
 
 
 def texture_scale(material: str, size: float) -> float:

@@ -45,6 +45,6 @@ def cast(shapes: list[mi.Mesh], camera: CameraSpec, canvas: Box) -> tuple[np.nda
     rays = camera.rays(u, v).reshape(-1, 3)
     dirs = rays / np.linalg.norm(rays, axis=1, keepdims=True)
     scene = mi.load_dict({"type": "scene", **{f"s{k:04d}": s for k, s in enumerate(shapes)}})
-    dist, index, _ = cast_rays(scene, shapes, dirs)
+    dist, index, *_ = cast_rays(scene, shapes, dirs)
     depth = np.where(index >= 0, dist * dirs[:, 2], 0.0)
     return index.reshape(h, w), depth.reshape(h, w)

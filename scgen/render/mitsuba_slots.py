@@ -1,0 +1,106 @@
+"""Mitsuba meshes kept for a worker's whole run and refilled every sample, at a fixed size.
+
+Why: the Mitsuba backend replays its render from a frozen recording (drjit.freeze), which holds only while
+every shape keeps its BSDF and every buffer its size; anything else records again, which costs what
+tracing the path tracer costs (about 20 ms). So a slot is one mesh with one BSDF for good, its triangles
+this sample's (unwelded: three corners each, in face order, as box_uv lays out their UVs), and the rest
+of its capacity NaN: Embree leaves triangles with non-finite corners out of its BVH, so the padding costs
+no build time and is never hit.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+ALIGNMENT = 64  # bytes: the widest vector loads of Dr.Jit's LLVM backend (AVX-512)
+
+
+def build_mesh(name: str, corners: np.ndarray, uv: np.ndarray, bsdf: mi.BSDF) -> mi.Mesh:
+    """A Mitsuba mesh of unwelded triangles: `corners` (3F x 3) and `uv` (3F x 2) hold three per face."""
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    n = len(corners)
+    m = mi.Mesh(name, n, n // 3, props=props, has_vertex_normals=False, has_vertex_texcoords=True)
+    params = mi.traverse(m)
+    params["vertex_positions"] = _flat(corners.astype(np.float32))
+    params["faces"] = _flat(np.arange(n, dtype=np.uint32))
+    params["vertex_texcoords"] = _flat(uv.astype(np.float32))
+    params.update()
+    return m
+
+
+class MeshSlot:
+    """One mesh with one BSDF, holding up to `capacity` triangles; `fill` sets this sample's.
+
+    The buffers are written in place, in the memory they have had since the capacity last grew: a frozen
+    recording keeps the address of every mesh buffer its kernels read (it replays into the same memory,
+    whatever variable the mesh holds now), so a new buffer with the same size would be replayed stale.
+    """
+
+    def __init__(self, name: str, bsdf: mi.BSDF, capacity: int) -> None:
+        self.triangles = 0  # how many of the capacity hold this sample's triangles
+        empty = np.zeros((0, 3))
+        self.mesh = build_mesh(
+            name, _padded(empty, capacity), _padded(empty[:, :2], capacity, fill=0.0), bsdf
+        )
+        self._params = mi.traverse(self.mesh)
+        self._params.keep(["vertex_positions", "vertex_texcoords", "faces"])
+        self.capacity = capacity
+
+    def fill(self, corners: np.ndarray, uv: np.ndarray) -> None:
+        """Hold these triangles (3F x 3 corners, 3F x 2 UVs); the capacity doubles until they fit, in new
+        buffers (the capacity is part of what a frozen render is keyed by)."""
+        n = len(corners) // 3
+        if n == 0 and self.triangles == 0:
+            return  # empty before and after: nothing to write
+        capacity = self.capacity
+        while n > capacity:
+            capacity *= 2
+        positions, texcoords = _padded(corners, capacity), _padded(uv, capacity, fill=0.0)
+        if capacity != self.capacity or not dr.is_jit_v(mi.Float):  # scalar_rgb renders nothing frozen
+            self._params["faces"] = _flat(np.arange(3 * capacity, dtype=np.uint32))
+            self._params["vertex_positions"] = _flat(positions)
+            self._params["vertex_texcoords"] = _flat(texcoords)
+            self._params.update()
+            self.capacity = capacity
+        else:
+            dr.sync_thread()  # no kernel still reads the buffers
+            np.asarray(self._params["vertex_positions"])[:] = positions.ravel()
+            np.asarray(self._params["vertex_texcoords"])[:] = texcoords.ravel()
+            self.mesh.parameters_changed(["vertex_positions", "vertex_texcoords"])
+        self.triangles = n
+
+
+def _flat(values: np.ndarray) -> Any:
+    """`values` (float32 or uint32) as the flat Dr.Jit array of a mesh buffer, from aligned memory."""
+    tensor = mi.TensorXu if values.dtype == np.uint32 else mi.TensorXf
+    return dr.ravel(tensor(aligned(values)))
+
+
+def _padded(values: np.ndarray, capacity: int, fill: float = np.nan) -> np.ndarray:
+    """`values` (rows of one corner each) as float32, followed by `fill` up to 3 * capacity rows."""
+    out = aligned_empty((3 * capacity, values.shape[1]), np.float32)
+    out[: len(values)] = values
+    out[len(values) :] = fill
+    return out
+
+
+def aligned_empty(shape: tuple[int, ...], dtype: type) -> np.ndarray:
+    """An uninitialised array whose memory starts on a 64-byte boundary. Dr.Jit takes numpy's memory as it
+    is, and notes whether it is aligned: a frozen render takes a change of that note for new inputs and
+    records again, and numpy's allocations fall on 16-byte boundaries, so the note would change."""
+    n, size = int(np.prod(shape)), np.dtype(dtype).itemsize
+    buffer = np.empty(n * size + ALIGNMENT, np.uint8)
+    start = -buffer.ctypes.data % ALIGNMENT
+    return buffer[start : start + n * size].view(dtype).reshape(shape)
+
+
+def aligned(values: np.ndarray) -> np.ndarray:
+    """A copy of `values` in memory from aligned_empty."""
+    out = aligned_empty(values.shape, values.dtype)
+    out[...] = values
+    return out
