@@ -6,8 +6,8 @@ Each size renders in a fresh worker process, as `scgen render` runs it (scgen.ru
 with --threads renderer threads: a worker of `scgen render --workers W` on C cores has C // W. With more than
 one, Dr.Jit's idle pool threads busy-wait for a while after each kernel before they sleep, on cores the
 worker's own numpy work (backgrounds, the camera stage) then shares.
-Usage: python benchmarks/bench_mitsuba.py [--n 30] [--sizes 64x48,320x240] [--threads N] [--full-n 30]
-       [--out DIR]
+Usage: python benchmarks/bench_mitsuba.py [--n 30] [--warmup 200] [--sizes 64x48,320x240] [--threads N]
+       [--full-n 30] [--out DIR]
 """
 
 from __future__ import annotations
@@ -35,19 +35,24 @@ from scgen.scenes.factors import spec_key
 from scgen.scenes.model import load_target
 
 
-def time_size(size: tuple[int, int], n: int, quality: str, seed: int, threads: int | None) -> dict:
-    """In a worker: samples 1..n of `seed` at `size` after sample 0 (a warm-up); per sample the seconds
-    of the render and of the annotation, CPU seconds, kernel launches and kernels compiled."""
+def time_size(
+    size: tuple[int, int], n: int, quality: str, seed: int, threads: int | None, warmup: int
+) -> dict:
+    """In a worker: samples warmup..warmup+n-1 of `seed` at `size` after the samples before them (a
+    warm-up); per sample the seconds of the render and of the annotation, CPU seconds, kernel launches,
+    kernels compiled and whether the render was traced and recorded (else it replayed a recording)."""
     import drjit as dr
 
     model = load_target()
     backend = create_backend("mitsuba", model, quality=quality, threads=threads)
     generator = Generator(model, load_config(resolution=size), seed)
-    backend.render(generator.scene(0))
+    for i in range(warmup):
+        backend.render(generator.scene(i))
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()
     out: dict[str, list[float]] = defaultdict(list)
-    for i in range(1, n + 1):
+    for i in range(warmup, warmup + n):
+        recordings = getattr(backend, "recordings", 0)  # 0 for code from before the frozen render
         spec = generator.scene(i)
         t0, c0 = time.perf_counter(), time.process_time()
         buffers = backend.render(spec)
@@ -59,19 +64,23 @@ def time_size(size: tuple[int, int], n: int, quality: str, seed: int, threads: i
         history = dr.kernel_history()
         out["launches"].append(len(history))
         out["compiled"].append(sum(1 for k in history if k.get("cache_hit") == 0))
+        out["recorded"].append(getattr(backend, "recordings", 0) - recordings)
     return {"variant": backend.variant, "spp": backend.spp, "threads": dr.thread_count(), **out}
 
 
-def side_by_side(sizes: list[tuple[int, int]], n: int, quality: str, seed: int, threads: int | None) -> None:
+def side_by_side(
+    sizes: list[tuple[int, int]], n: int, quality: str, seed: int, threads: int | None, warmup: int
+) -> None:
     """The per-sample figures of each size, one column each, and the fixed part of a straight-line fit."""
     results = []
     for size in sizes:
         with spawn_pool(1) as pool:
-            results.append(pool.submit(time_size, size, n, quality, seed, threads).result())
+            results.append(pool.submit(time_size, size, n, quality, seed, threads, warmup).result())
     r0 = results[0]
     print(
         f"Mitsuba ({r0['variant']}, {quality}, {r0['spp']} spp, {r0['threads']} renderer thread(s)), seed "
-        f"{seed}: samples 1-{n} after a warm-up, each size in a fresh worker process"
+        f"{seed}: samples {warmup}-{warmup + n - 1} after {warmup} warm-up samples, each size in a fresh "
+        "worker process"
     )
     print(f"  {'per sample':<30s}" + "".join(f"{f'{w}x{h}':>12s}" for w, h in sizes))
     rows = [
@@ -81,6 +90,7 @@ def side_by_side(sizes: list[tuple[int, int]], n: int, quality: str, seed: int, 
         ("CPU ms (all threads), median", lambda r: 1000 * np.median(r["cpu"])),
         ("kernel launches, median", lambda r: np.median(r["launches"])),
         ("kernels compiled, mean", lambda r: np.mean(r["compiled"])),
+        ("renders traced and recorded, %", lambda r: 100 * np.mean(r["recorded"])),
     ]
     for label, value in rows:
         print(f"  {label:<30s}" + "".join(f"{value(r):12.1f}" for r in results))
@@ -145,6 +155,12 @@ def full_size(n: int, quality: str, out: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--n", type=int, default=30, help="samples per size, side by side")
+    ap.add_argument(
+        "--warmup",
+        type=int,
+        default=200,
+        help="samples rendered before the timed ones (a worker's first ones record its renders)",
+    )
     ap.add_argument("--sizes", default="64x48,320x240")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--full-n", type=int, default=30, help="samples at 640x480 (0: skip)")
@@ -153,7 +169,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     sizes = [(int(w), int(h)) for w, h in (s.split("x") for s in args.sizes.split(","))]
-    side_by_side(sizes, args.n, args.quality, args.seed, args.threads)
+    side_by_side(sizes, args.n, args.quality, args.seed, args.threads, args.warmup)
     if args.full_n:
         full_size(args.full_n, args.quality, args.out or Path(tempfile.mkdtemp()) / "bench")
 

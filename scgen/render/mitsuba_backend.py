@@ -14,7 +14,9 @@ lights grows, a mesh outgrows its capacity, or the lights' bounding sphere chang
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import drjit as dr
 import mitsuba as mi
@@ -28,14 +30,15 @@ from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_llvm import mitsuba_setup
 from scgen.render.mitsuba_materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
-from scgen.render.mitsuba_slots import MeshSlot, build_mesh
+from scgen.render.mitsuba_slots import MeshSlot, aligned, build_mesh
 from scgen.render.props import prop_mesh
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
 QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
 GUARD_M = 1e4  # half the span of the guard triangle (see MitsubaBackend.__init__)
-PROP_SLOT_TRIANGLES = 1024  # a material's prop mesh holds this many triangles at first (it grows if need be)
+PROP_SLOT_TRIANGLES = 4096  # a material's prop mesh holds this many triangles at first (it grows if need be)
+FINISHES_PER_CLASS = 3  # target BSDFs (and meshes) made per material class at the start (see TargetFinishes)
 RECORDINGS_KEPT = 32  # frozen renders a backend keeps, the least recently used dropped first
 LIGHT_KEYS = ("irradiance.value", "to_world")  # what a directional light takes from each sample
 
@@ -76,14 +79,17 @@ class MitsubaBackend:
         for k, (material, _) in enumerate(model.parts):
             self._classes.setdefault(material, []).append(k)
         self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
-        self._finishes = TargetFinishes()
+        self._finishes = TargetFinishes(FINISHES_PER_CLASS)
         self._reach = 1.01 * float(np.linalg.norm(model.mesh.vertices, axis=1).max())  # target's radius
         # the target's slots, one per BSDF it is drawn with (named as TargetFinishes names them, or by the
         # nominal class), each large enough for the largest part class; the props', one per material class
-        self._target_slots: dict[str, MeshSlot] = {}
         self._target_capacity = max(
             sum(len(model.parts[k][1].faces) for k in ks) for ks in self._classes.values()
         )
+        self._target_slots = {
+            name: MeshSlot(f"target_{name}", bsdf, self._target_capacity)
+            for name, bsdf in self._finishes.pooled()
+        }
         self._prop_slots = {m: MeshSlot(f"props_{m}", b, PROP_SLOT_TRIANGLES) for m, b in self.bsdfs.items()}
         # one triangle of no area, never hit, whose box spans 20 km: beside it Embree finds no spatial
         # split worth making, and builds the target's BVH in 8 ms instead of 19 (labels are the same)
@@ -94,9 +100,15 @@ class MitsubaBackend:
         # this backend's own recordings: they hold the addresses of its meshes' buffers, which another
         # backend's meshes in the same layout would not have
         self._frozen_render = dr.freeze(_render_scene, limit=RECORDINGS_KEPT, warn_after=2**31 - 1)
+        self._frozen_intersect = dr.freeze(intersect_from_origin, limit=RECORDINGS_KEPT, warn_after=2**31 - 1)
 
     def close(self) -> None:
         pass
+
+    @property
+    def recordings(self) -> int:
+        """How many renders traced the path tracer and recorded it; every other render replayed one."""
+        return self._frozen_render.n_recordings if dr.is_jit_v(mi.Float) else 0
 
     def _fill(self, spec: SceneSpec, shaded: bool = True) -> SampleMeshes:
         """Put the sample's target and props, in the camera frame, into their slots. `shaded`: the target
@@ -150,7 +162,7 @@ class MitsubaBackend:
     def render(self, spec: SceneSpec) -> Buffers:
         layout = self._fill(spec)
         scene = self._scene(spec, layout)
-        buffers = self._passes(spec, scene, layout)
+        buffers = self._passes(spec, scene, layout, self._intersect)
         buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, scene, layout), buffers.instance)
         return buffers
 
@@ -159,15 +171,18 @@ class MitsubaBackend:
         layout = self._fill(spec, shaded=False)
         return self._passes(spec, self._scene_of(layout.target + layout.props), layout)
 
-    def _passes(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> Buffers:
-        """The exact geometric passes of `scene` (holding `layout`'s meshes): one ray per pixel centre.
+    def _passes(
+        self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes, intersect: Callable | None = None
+    ) -> Buffers:
+        """The exact geometric passes of `scene` (holding `layout`'s meshes): one ray per pixel centre,
+        the first cast through `intersect` (see cast_rays).
 
         The target-alone depth equals the depth wherever the target is hit first; only the rays that hit
         a prop no farther than the target's bounding sphere reaches are cast again, through the target alone.
         """
         W, H = spec.camera.width, spec.camera.height
         rays_cam = spec.camera.pixel_directions().reshape(-1, 3)
-        t_all, idx_all, normal, prim = cast_rays(scene, layout.target + layout.props, rays_cam)
+        t_all, idx_all, normal, prim = cast_rays(scene, layout.target + layout.props, rays_cam, intersect)
         n_target = len(layout.target)
         hit = idx_all >= 0
         on_target = hit & (idx_all < n_target)
@@ -247,6 +262,14 @@ class MitsubaBackend:
         background = background_image(replace(spec, camera=render_camera(spec.camera)))
         return fg + (1.0 - np.clip(alpha, 0, 1)) * background
 
+    def _intersect(self, scene: mi.Scene, d: mi.Vector3f) -> tuple:
+        """intersect_from_origin, replayed from a frozen recording: keyed by the meshes' capacities (their
+        buffers' addresses) and the ray count (never left to the recording's size inference)."""
+        return self._frozen_intersect(scene, d, capacities=self._capacities(), rays=dr.width(d))
+
+    def _capacities(self) -> tuple[int, ...]:
+        return tuple(s.capacity for s in [*self._target_slots.values(), *self._prop_slots.values()])
+
     def _render(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> mi.TensorXf:
         """mi.render of `scene`, replayed from a frozen recording in a JIT variant. Its inputs name every
         live object the recorded kernels call into (the other scenes' lights too) and, as plain values,
@@ -254,9 +277,8 @@ class MitsubaBackend:
         if not dr.is_jit_v(mi.Float):
             return mi.render(scene, seed=render_seed(spec))
         others = [e for other, _ in self._scenes.values() if other is not scene for e in other.emitters()]
-        capacities = tuple(s.capacity for s in [*self._target_slots.values(), *self._prop_slots.values()])
         seed = dr.opaque(mi.UInt32, render_seed(spec))
-        return self._frozen_render(scene, seed, _light_radius(layout.extent), capacities, others)
+        return self._frozen_render(scene, seed, _light_radius(layout.extent), self._capacities(), others)
 
 
 def _render_scene(
@@ -328,31 +350,34 @@ def _steady_light_bounds(scene: mi.Scene, extent: float) -> None:
 
 
 def cast_rays(
-    scene: mi.Scene, shapes: list, dirs: np.ndarray
+    scene: mi.Scene, shapes: list, dirs: np.ndarray, intersect: Callable | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ray length, index of the hit shape in `shapes` (-1 = miss), geometric normal and index of the hit
-    triangle in its shape, rays from the origin."""
+    triangle in its shape, rays from the origin. `intersect`: intersect_from_origin or a frozen one."""
     if not dr.is_jit_v(mi.Float):
         return _cast_rays_one_by_one(scene, shapes, dirs)
-    o = mi.Point3f(0.0, 0.0, 0.0)
-    ray = mi.Ray3f(o, mi.Vector3f(dirs[:, 0], dirs[:, 1], dirs[:, 2]))
-    si = scene.ray_intersect(ray)
-    valid = np.asarray(si.is_valid())
-    t = np.where(valid, np.asarray(si.t, np.float64), np.inf)
+    d = mi.Vector3f(*(mi.Float(aligned(dirs[:, k].astype(np.float32))) for k in range(3)))
+    t, hit_ids, nx, ny, nz, prim, valid = (
+        np.asarray(x) for x in (intersect or intersect_from_origin)(scene, d)
+    )
+    t = np.where(valid, t.astype(np.float64), np.inf)
     idx = np.full(len(dirs), -1, np.int64)
     if shapes:  # scene.shapes() is not in insertion order: map each hit's shape registry id to its index
         ids = np.array([_registry_id(mi.ShapePtr(s))[0] for s in shapes])
-        hit_ids = _registry_id(si.shape)
+        hit_ids = hit_ids.astype(np.int64)
         lut = np.full(max(int(ids.max()), int(hit_ids.max())) + 1, -1, np.int64)
         lut[ids] = np.arange(len(shapes))
         idx = np.where(valid, lut[hit_ids], -1)
-    n = np.stack([np.asarray(si.n.x), np.asarray(si.n.y), np.asarray(si.n.z)], 1).astype(np.float64)
-    return (
-        t,
-        idx,
-        np.where(valid[:, None], n, 0.0),
-        np.where(valid, np.asarray(si.prim_index), 0).astype(np.int64),
-    )
+    n = np.stack([nx, ny, nz], 1).astype(np.float64)
+    return t, idx, np.where(valid[:, None], n, 0.0), np.where(valid, prim, 0).astype(np.int64)
+
+
+def intersect_from_origin(scene: mi.Scene, d: mi.Vector3f, **key: Any) -> tuple:
+    """The first hits of rays from the origin along `d`: length, hit shape's registry id, geometric normal
+    (x, y, z), triangle and whether there is one. `key`: what a frozen version is keyed by, unused here."""
+    si = scene.ray_intersect(mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), d))
+    shape_id = dr.reinterpret_array(mi.UInt32, si.shape)
+    return si.t, shape_id, si.n.x, si.n.y, si.n.z, si.prim_index, si.is_valid()
 
 
 def _cast_rays_one_by_one(

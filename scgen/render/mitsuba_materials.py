@@ -128,14 +128,21 @@ class TargetFinishes:
     class's BSDFs per part class drawing it, sets it to the sample's values in place (mi.traverse), and
     builds one only when all are taken (two part classes drawing one class).
 
-    Dr.Jit traces every live BSDF into each render kernel, used by the scene or not (about 1 ms each), and
-    compiles a new kernel whenever the set of live BSDFs changes. So the set stops changing after the
-    first samples, and stays small: one BSDF per (part class, class drawn) would be 36.
+    Dr.Jit traces every live BSDF into each render kernel, used by the scene or not, and a new BSDF means
+    a new kernel (and, for a frozen render, recording every render again). So each class starts with
+    `per_class` BSDFs (the default config needs a third one in a few samples per thousand, a fourth in a
+    few per 50,000), and the set stays small: one BSDF per (part class, class drawn) would be 36.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, per_class: int = 1) -> None:
         # class drawn -> its BSDFs, each with its parameters (traversed once: a traversal costs 0.2 ms)
         self._pools: dict[str, list[tuple[mi.BSDF, mi.SceneParameters]]] = {}
+        for name, m in MATERIALS.items():
+            self._pools[name] = [(b, mi.traverse(b)) for b in (finish_bsdf(m) for _ in range(per_class))]
+
+    def pooled(self) -> list[tuple[str, mi.BSDF]]:
+        """Every BSDF kept, with its name (as `bsdfs` names it)."""
+        return [(f"{drawn}_{k}", b) for drawn, pool in self._pools.items() for k, (b, _) in enumerate(pool)]
 
     def bsdfs(self, finish: dict[str, dict]) -> dict[str, tuple[str, mi.BSDF]]:
         """The BSDF of every part class under a sample's finish (scgen.scenes.finish), each with a name
