@@ -97,6 +97,7 @@ class MitsubaBackend:
         self._guard = build_mesh("guard", far, np.zeros((3, 2)), self.bsdfs["white_paint"])
         # the path tracer's scenes, by (camera, with the Earth's light), with their lights' parameters
         self._scenes: dict[tuple, tuple[mi.Scene, mi.SceneParameters]] = {}
+        self._cast_scenes: dict[str, mi.Scene] = {}  # ray-cast scenes kept likewise (see _cast_scene)
         # this backend's own recordings: they hold the addresses of its meshes' buffers, which another
         # backend's meshes in the same layout would not have
         self._frozen_render = dr.freeze(_render_scene, limit=RECORDINGS_KEPT, warn_after=2**31 - 1)
@@ -122,6 +123,7 @@ class MitsubaBackend:
             if name not in self._target_slots:
                 self._target_slots[name] = MeshSlot(f"target_{name}", bsdf, self._target_capacity)
                 self._scenes.clear()  # a new mesh: every scene is rebuilt with it
+                self._cast_scenes.clear()
             drawn = spec.finish[cls]["material"] if cls in spec.finish else cls
             corners = np.concatenate([transform_points(mesh.vertices, T)[mesh.faces].reshape(-1, 3)
                                       for mesh in (self.model.parts[k][1] for k in parts)])  # fmt: skip
@@ -162,35 +164,38 @@ class MitsubaBackend:
     def render(self, spec: SceneSpec) -> Buffers:
         layout = self._fill(spec)
         scene = self._scene(spec, layout)
-        buffers = self._passes(spec, scene, layout, self._intersect)
+        buffers = self._passes(spec, scene, layout)
         buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, scene, layout), buffers.instance)
         return buffers
 
     def render_geometry(self, spec: SceneSpec) -> Buffers:
         """Only the exact geometric passes (RGB left black): labels at a fraction of the cost."""
         layout = self._fill(spec, shaded=False)
-        return self._passes(spec, self._scene_of(layout.target + layout.props), layout)
+        slots = [*self._target_slots.values(), *self._prop_slots.values()]
+        return self._passes(spec, self._cast_scene("all", slots), layout)
 
-    def _passes(
-        self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes, intersect: Callable | None = None
-    ) -> Buffers:
-        """The exact geometric passes of `scene` (holding `layout`'s meshes): one ray per pixel centre,
-        the first cast through `intersect` (see cast_rays).
+    def _passes(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> Buffers:
+        """The exact geometric passes of `scene` (holding `layout`'s meshes): one ray per pixel centre.
 
         The target-alone depth equals the depth wherever the target is hit first; only the rays that hit
         a prop no farther than the target's bounding sphere reaches are cast again, through the target alone.
         """
         W, H = spec.camera.width, spec.camera.height
         rays_cam = spec.camera.pixel_directions().reshape(-1, 3)
-        t_all, idx_all, normal, prim = cast_rays(scene, layout.target + layout.props, rays_cam, intersect)
+        t_all, idx_all, normal, prim = cast_rays(
+            scene, layout.target + layout.props, rays_cam, self._intersect
+        )
         n_target = len(layout.target)
         hit = idx_all >= 0
         on_target = hit & (idx_all < n_target)
         on_prop = hit & ~on_target
         t_tgt = np.where(on_target, t_all, np.inf)
         behind = on_prop & self._may_reach_target(spec, rays_cam, t_all)
-        if behind.any():
-            t_tgt[behind] = cast_rays(self._scene_of(layout.target), [], rays_cam[behind])[0]
+        if behind.any():  # as many rays as the image has (the first repeated), so one recording serves all
+            chosen = rays_cam[behind]
+            rays = np.concatenate([chosen, np.repeat(chosen[:1], len(rays_cam) - len(chosen), axis=0)])
+            target = self._cast_scene("target", list(self._target_slots.values()))
+            t_tgt[behind] = cast_rays(target, [], rays, self._intersect)[0][: len(chosen)]
         z_scale = rays_cam[:, 2]
         depth = np.where(np.isfinite(t_all), t_all * z_scale, 0.0).reshape(H, W).astype(np.float32)
         target_depth = np.where(np.isfinite(t_tgt), t_tgt * z_scale, 0.0).reshape(H, W).astype(np.float32)
@@ -215,6 +220,17 @@ class MitsubaBackend:
             normal=normal.reshape(H, W, 3).astype(np.float32),
             sun_blocked=sun_blocked.reshape(H, W),
         )
+
+    def _cast_scene(self, name: str, slots: list[MeshSlot]) -> mi.Scene:
+        """A scene of these slots (and the guard) for ray casts, kept from sample to sample under `name`
+        so that its casts replay frozen. Its BVH is rebuilt for the refilled meshes: touching the guard
+        marks it out of date even when another scene's rebuild has already marked the slots up to date."""
+        if name not in self._cast_scenes:
+            self._cast_scenes[name] = self._scene_of([slot.mesh for slot in slots])
+        else:
+            self._guard.parameters_changed(["vertex_positions"])
+            self._cast_scenes[name].parameters_changed([])
+        return self._cast_scenes[name]
 
     def _scene_of(self, shapes: list[mi.Mesh]) -> mi.Scene:
         """A scene of these shapes alone (and the guard), for ray casts."""
