@@ -4,8 +4,8 @@ Why: the Mitsuba backend replays its render from a frozen recording (drjit.freez
 every shape keeps its BSDF and every buffer its size; anything else records again, which costs what
 tracing the path tracer costs (about 20 ms). So a slot is one mesh with one BSDF for good, its triangles
 this sample's (unwelded: three corners each, in face order, as box_uv lays out their UVs), and the rest
-of its capacity NaN: Embree leaves triangles with non-finite corners out of its BVH, so the padding costs
-no build time and is never hit.
+of its capacity NaN: Embree leaves triangles with non-finite corners out of its BVH, so the padding is
+never hit and costs little (a BVH rebuild took 0.7 ms longer with twelve empty 4716-triangle slots).
 """
 
 from __future__ import annotations
@@ -37,8 +37,8 @@ class MeshSlot:
     """One mesh with one BSDF, holding up to `capacity` triangles; `fill` sets this sample's.
 
     The buffers are written in place, in the memory they have had since the capacity last grew: a frozen
-    recording keeps the address of every mesh buffer its kernels read (it replays into the same memory,
-    whatever variable the mesh holds now), so a new buffer with the same size would be replayed stale.
+    recording keeps the address of every mesh buffer its kernels read (a replay reads that memory, whatever
+    variable the mesh holds now), so a new buffer of the same size would be replayed stale.
     """
 
     def __init__(self, name: str, bsdf: mi.BSDF, capacity: int) -> None:
