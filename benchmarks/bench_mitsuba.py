@@ -46,10 +46,10 @@ def time_size(
     model = load_target()
     backend = create_backend("mitsuba", model, quality=quality, threads=threads)
     generator = Generator(model, load_config(resolution=size), seed)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)  # from the start: a frozen render is keyed by the JIT flags
     for i in range(warmup):
         backend.render(generator.scene(i))
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()
+        dr.kernel_history()
     out: dict[str, list[float]] = defaultdict(list)
     for i in range(warmup, warmup + n):
         recordings = getattr(backend, "recordings", 0)  # 0 for code from before the frozen render
