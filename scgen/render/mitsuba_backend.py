@@ -171,8 +171,7 @@ class MitsubaBackend:
     def render_geometry(self, spec: SceneSpec) -> Buffers:
         """Only the exact geometric passes (RGB left black): labels at a fraction of the cost."""
         layout = self._fill(spec, shaded=False)
-        slots = [*self._target_slots.values(), *self._prop_slots.values()]
-        return self._passes(spec, self._cast_scene("all", slots), layout)
+        return self._passes(spec, self._cast_scene("all", self._slots()), layout)
 
     def _passes(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> Buffers:
         """The exact geometric passes of `scene` (holding `layout`'s meshes): one ray per pixel centre.
@@ -252,10 +251,9 @@ class MitsubaBackend:
         lights, camera = _lights(spec), render_camera(spec.camera)
         key = (camera, tuple(lights))
         if key not in self._scenes:
-            shapes = [*self._target_slots.values(), *self._prop_slots.values()]
             sensor = _sensor(camera, self.spp)
             d = {"type": "scene", "integrator": {"type": "path", "max_depth": 4}, "sensor": sensor, **lights}
-            d.update({f"s{k:03d}": slot.mesh for k, slot in enumerate(shapes)}, guard=self._guard)
+            d.update({f"s{k:03d}": slot.mesh for k, slot in enumerate(self._slots())}, guard=self._guard)
             scene = mi.load_dict(d)
             params = mi.traverse(scene)
             params.keep([f"{name}.{key}" for name in lights for key in LIGHT_KEYS])
@@ -267,7 +265,7 @@ class MitsubaBackend:
                 for k in LIGHT_KEYS:
                     params[f"{name}.{k}"] = new[k]
             params.update()
-            scene.parameters_changed([])
+            scene.parameters_changed([])  # the BVH, for the refilled meshes, whether or not a light changed
         _steady_light_bounds(scene, layout.extent)
         return scene
 
@@ -283,8 +281,12 @@ class MitsubaBackend:
         buffers' addresses) and the ray count (never left to the recording's size inference)."""
         return self._frozen_intersect(scene, d, capacities=self._capacities(), rays=dr.width(d))
 
+    def _slots(self) -> list[MeshSlot]:
+        """Every slot, the target's then the props'."""
+        return [*self._target_slots.values(), *self._prop_slots.values()]
+
     def _capacities(self) -> tuple[int, ...]:
-        return tuple(s.capacity for s in [*self._target_slots.values(), *self._prop_slots.values()])
+        return tuple(s.capacity for s in self._slots())
 
     def _render(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> mi.TensorXf:
         """mi.render of `scene`, replayed from a frozen recording in a JIT variant. Its inputs name every

@@ -142,7 +142,9 @@ class TargetFinishes:
 
     def pooled(self) -> list[tuple[str, mi.BSDF]]:
         """Every BSDF kept, with its name (as `bsdfs` names it)."""
-        return [(f"{drawn}_{k}", b) for drawn, pool in self._pools.items() for k, (b, _) in enumerate(pool)]
+        return [
+            (_pool_name(drawn, k), b) for drawn, pool in self._pools.items() for k, (b, _) in enumerate(pool)
+        ]
 
     def bsdfs(self, finish: dict[str, dict]) -> dict[str, tuple[str, mi.BSDF]]:
         """The BSDF of every part class under a sample's finish (scgen.scenes.finish), each with a name
@@ -158,8 +160,13 @@ class TargetFinishes:
                 pool.append((bsdf, mi.traverse(bsdf)))
             else:
                 _set_finish(pool[k][1], m)
-            out[part_class] = f"{drawn}_{k}", pool[k][0]
+            out[part_class] = _pool_name(drawn, k), pool[k][0]
         return out
+
+
+def _pool_name(drawn: str, k: int) -> str:
+    """The name of the k-th BSDF kept for the class drawn."""
+    return f"{drawn}_{k}"
 
 
 def _set_finish(params: mi.SceneParameters, m: Material) -> None:
