@@ -26,12 +26,14 @@ from trimesh.transformations import transform_points
 from scgen.render.backgrounds import background_image
 from scgen.render.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.camera import record_image, render_camera
-from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, check_quality, render_seed
-from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
+from scgen.render.conventions import CLIP_END_M, CLIP_START_M, check_quality, render_seed
+from scgen.render.mitsuba_lights import SceneLights, light_radius, sample_lights
 from scgen.render.mitsuba_llvm import mitsuba_setup
 from scgen.render.mitsuba_materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
-from scgen.render.mitsuba_slots import MeshSlot, aligned, build_mesh
+from scgen.render.mitsuba_memory import aligned
+from scgen.render.mitsuba_slots import MeshSlot, build_mesh, registry_id
 from scgen.render.props import prop_mesh
+from scgen.render.ray_cull import may_hit
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
@@ -40,7 +42,6 @@ GUARD_M = 1e4  # half the span of the guard triangle (see MitsubaBackend.__init_
 PROP_SLOT_TRIANGLES = 4096  # a material's prop mesh holds this many triangles at first (it grows if need be)
 FINISHES_PER_CLASS = 3  # target BSDFs (and meshes) made per material class at the start (see TargetFinishes)
 RECORDINGS_KEPT = 32  # frozen renders a backend keeps, the least recently used dropped first
-LIGHT_KEYS = ("irradiance.value", "to_world")  # what a directional light takes from each sample
 
 
 def select_variant() -> str:
@@ -52,14 +53,15 @@ def select_variant() -> str:
 
 
 class SampleMeshes:
-    """Where a sample's shapes went: the target's meshes (one per part class, in the model's class order)
+    """Where a sample's shapes went: the target's slots (one per part class, in the model's class order)
     and the props' (one per material with any), with the prop each of their triangles belongs to."""
 
     def __init__(self) -> None:
-        self.target: list[mi.Mesh] = []
-        self.props: list[mi.Mesh] = []
+        self.target: list[MeshSlot] = []
+        self.props: list[MeshSlot] = []
         self.owners: list[np.ndarray] = []  # per prop mesh: index into SceneSpec.props, per triangle
         self.extent = 0.0  # the largest |coordinate| of any corner (metres, camera frame)
+        self.target_corners: list[np.ndarray] = []  # per target slot: its triangles' corners (3F x 3)
 
 
 class MitsubaBackend:
@@ -91,12 +93,14 @@ class MitsubaBackend:
             for name, bsdf in self._finishes.pooled()
         }
         self._prop_slots = {m: MeshSlot(f"props_{m}", b, PROP_SLOT_TRIANGLES) for m, b in self.bsdfs.items()}
+        # the target's triangles that rays meeting a prop first may hit, cast again through the target alone
+        self._target_alone = MeshSlot("target_alone", self.bsdfs["white_paint"], len(model.mesh.faces))
         # one triangle of no area, never hit, whose box spans 20 km: beside it Embree finds no spatial
         # split worth making, and builds the target's BVH in 8 ms instead of 19 (labels are the same)
         far = GUARD_M * np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [1.0, 1.0, -1.0]])
         self._guard = build_mesh("guard", far, np.zeros((3, 2)), self.bsdfs["white_paint"])
-        # the path tracer's scenes, by (camera, with the Earth's light), with their lights' parameters
-        self._scenes: dict[tuple, tuple[mi.Scene, mi.SceneParameters]] = {}
+        # the path tracer's scenes, by (camera, with the Earth's light), with their lights
+        self._scenes: dict[tuple, tuple[mi.Scene, SceneLights]] = {}
         self._cast_scenes: dict[str, mi.Scene] = {}  # ray-cast scenes kept likewise (see _cast_scene)
         # this backend's own recordings: they hold the addresses of its meshes' buffers, which another
         # backend's meshes in the same layout would not have
@@ -116,6 +120,7 @@ class MitsubaBackend:
         with the sample's finish (else the nominal BSDFs)."""
         T = spec.target.matrix
         finish = {cls: f for cls, f in spec.finish.items() if cls in self._classes} if shaded else {}
+        dr.sync_thread()  # no kernel still reads what this sample overwrites (its meshes, finishes, lights)
         drawn_with = self._finishes.bsdfs(finish)
         layout, filled = SampleMeshes(), set()
         for cls, parts in self._classes.items():
@@ -131,7 +136,8 @@ class MitsubaBackend:
             slot = self._target_slots[name]
             slot.fill(corners, uv)
             filled.add(name)
-            layout.target.append(slot.mesh)
+            layout.target.append(slot)
+            layout.target_corners.append(corners)
             layout.extent = max(layout.extent, float(np.abs(corners.astype(np.float32)).max()))
         for name, slot in self._target_slots.items():
             if name not in filled:
@@ -149,7 +155,7 @@ class MitsubaBackend:
             slot.fill(np.concatenate([c for _, c, _ in pieces] or [np.zeros((0, 3))]),
                       np.concatenate([uv for _, _, uv in pieces] or [np.zeros((0, 2))]))  # fmt: skip
             if pieces:
-                layout.props.append(slot.mesh)
+                layout.props.append(slot)
                 layout.owners.append(np.concatenate([np.full(len(c) // 3, k) for k, c, _ in pieces]))
         return layout
 
@@ -181,9 +187,8 @@ class MitsubaBackend:
         """
         W, H = spec.camera.width, spec.camera.height
         rays_cam = spec.camera.pixel_directions().reshape(-1, 3)
-        t_all, idx_all, normal, prim = cast_rays(
-            scene, layout.target + layout.props, rays_cam, self._intersect
-        )
+        shapes = layout.target + layout.props
+        t_all, idx_all, normal, prim = cast_rays(scene, shapes, rays_cam, self._intersect)
         n_target = len(layout.target)
         hit = idx_all >= 0
         on_target = hit & (idx_all < n_target)
@@ -193,7 +198,11 @@ class MitsubaBackend:
         if behind.any():  # as many rays as the image has (the first repeated), so one recording serves all
             chosen = rays_cam[behind]
             rays = np.concatenate([chosen, np.repeat(chosen[:1], len(rays_cam) - len(chosen), axis=0)])
-            target = self._cast_scene("target", list(self._target_slots.values()))
+            corners = np.concatenate(layout.target_corners)
+            kept = np.repeat(may_hit(corners.reshape(-1, 3, 3), chosen), 3)
+            dr.sync_thread()  # the last sample's cast through the target alone is done with its buffers
+            self._target_alone.fill(corners[kept], np.zeros((int(kept.sum()), 2)))
+            target = self._cast_scene("target", [self._target_alone])
             t_tgt[behind] = cast_rays(target, [], rays, self._intersect)[0][: len(chosen)]
         z_scale = rays_cam[:, 2]
         depth = np.where(np.isfinite(t_all), t_all * z_scale, 0.0).reshape(H, W).astype(np.float32)
@@ -209,7 +218,8 @@ class MitsubaBackend:
         sun_blocked = np.zeros(H * W, bool)
         if layout.props and on_target.any():
             origins = rays_cam[on_target] * t_all[on_target, None] + 1e-4 * normal[on_target]
-            sun_blocked[on_target] = _occluded(self._scene_of(layout.props), origins, sun)
+            props = self._cast_scene("props", list(self._prop_slots.values()))
+            sun_blocked[on_target] = _occluded(props, origins, sun)
 
         return Buffers(
             rgb=np.zeros((H, W, 3), np.uint8),
@@ -222,17 +232,22 @@ class MitsubaBackend:
 
     def _cast_scene(self, name: str, slots: list[MeshSlot]) -> mi.Scene:
         """A scene of these slots (and the guard) for ray casts, kept from sample to sample under `name`
-        so that its casts replay frozen. Its BVH is rebuilt for the refilled meshes: touching the guard
-        marks it out of date even when another scene's rebuild has already marked the slots up to date."""
+        so that its casts replay frozen; its BVH rebuilt for the refilled slots."""
         if name not in self._cast_scenes:
             self._cast_scenes[name] = self._scene_of([slot.mesh for slot in slots])
         else:
-            self._guard.parameters_changed(["vertex_positions"])
-            self._cast_scenes[name].parameters_changed([])
+            self._rebuild(self._cast_scenes[name])
         return self._cast_scenes[name]
 
+    def _rebuild(self, scene: mi.Scene) -> None:
+        """Rebuild a kept scene's BVH for its slots' new triangles. The slots are written without telling
+        them (mitsuba_slots), so the guard is touched: a scene rebuilds when any of its shapes changed, and
+        another scene's rebuild marks the guard up to date again."""
+        self._guard.parameters_changed(["vertex_positions"])
+        scene.parameters_changed([])
+
     def _scene_of(self, shapes: list[mi.Mesh]) -> mi.Scene:
-        """A scene of these shapes alone (and the guard), for ray casts."""
+        """A scene of these meshes alone (and the guard), for ray casts."""
         shapes = [*shapes, self._guard]
         return mi.load_dict({"type": "scene", **{f"s{k:03d}": s for k, s in enumerate(shapes)}})
 
@@ -248,25 +263,18 @@ class MitsubaBackend:
         """The path tracer's scene, holding every slot (filled for `spec`), the sun (and earthshine), the
         render camera (scgen.render.camera.lens) and its film: built once per camera and Earth's light,
         then given each sample's lights; its BVH is rebuilt for the refilled meshes."""
-        lights, camera = _lights(spec), render_camera(spec.camera)
+        lights, camera = sample_lights(spec), render_camera(spec.camera)
         key = (camera, tuple(lights))
         if key not in self._scenes:
             sensor = _sensor(camera, self.spp)
             d = {"type": "scene", "integrator": {"type": "path", "max_depth": 4}, "sensor": sensor, **lights}
             d.update({f"s{k:03d}": slot.mesh for k, slot in enumerate(self._slots())}, guard=self._guard)
             scene = mi.load_dict(d)
-            params = mi.traverse(scene)
-            params.keep([f"{name}.{key}" for name in lights for key in LIGHT_KEYS])
-            self._scenes[key] = scene, params
+            self._scenes[key] = scene, SceneLights(scene, list(lights))
         else:
-            scene, params = self._scenes[key]
-            for name, light in lights.items():
-                new = mi.traverse(mi.load_dict(light))
-                for k in LIGHT_KEYS:
-                    params[f"{name}.{k}"] = new[k]
-            params.update()
-            scene.parameters_changed([])  # the BVH, for the refilled meshes, whether or not a light changed
-        _steady_light_bounds(scene, layout.extent)
+            self._rebuild(self._scenes[key][0])
+        scene, scene_lights = self._scenes[key]
+        scene_lights.set(lights, layout.extent)
         return scene
 
     def _shade(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> np.ndarray:
@@ -296,7 +304,7 @@ class MitsubaBackend:
             return mi.render(scene, seed=render_seed(spec))
         others = [e for other, _ in self._scenes.values() if other is not scene for e in other.emitters()]
         seed = dr.opaque(mi.UInt32, render_seed(spec))
-        return self._frozen_render(scene, seed, _light_radius(layout.extent), self._capacities(), others)
+        return self._frozen_render(scene, seed, light_radius(layout.extent), self._capacities(), others)
 
 
 def _render_scene(
@@ -330,50 +338,14 @@ def _sensor(cam, spp: int) -> dict:
     }
 
 
-def _lights(spec: SceneSpec) -> dict[str, dict]:
-    """The sample's directional lights: the sun, and the Earth's reflected light where it has one."""
-    lights = {
-        "sun": {
-            "type": "directional",
-            "direction": [-float(x) for x in spec.sun.direction],
-            "irradiance": {"type": "rgb", "value": sun_render_irradiance(spec)},
-        }
-    }
-    albedo = earth_albedo_light(spec)
-    if albedo is not None:
-        direction, irradiance = albedo
-        lights["earthshine"] = {
-            "type": "directional",
-            "direction": [-float(x) for x in direction],
-            "irradiance": {"type": "rgb", "value": [c * irradiance for c in EARTHSHINE_COLOUR]},
-        }
-    return lights
-
-
-def _light_radius(extent: float) -> float:
-    """The half side of the cube the lights' bounding sphere encloses: the power of two at least `extent`
-    (the scene's largest |coordinate|), so that it changes seldom."""
-    return float(2.0 ** np.ceil(np.log2(max(extent, CLIP_START_M))))
-
-
-def _steady_light_bounds(scene: mi.Scene, extent: float) -> None:
-    """Give the directional lights a bounding sphere about the camera, that of a cube of half side
-    _light_radius(extent): they keep their scene's sphere as constants of the render kernel, so the scene's
-    own sphere compiled a new kernel for every sample (and a frozen render would replay a stale one)."""
-    half = _light_radius(extent)
-    cube = {"type": "cube", "to_world": mi.ScalarTransform4f().scale([half] * 3)}
-    bounds = mi.load_dict({"type": "scene", "cube": cube})
-    for emitter in scene.emitters():
-        emitter.set_scene(bounds)
-
-
 def cast_rays(
     scene: mi.Scene, shapes: list, dirs: np.ndarray, intersect: Callable | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Ray length, index of the hit shape in `shapes` (-1 = miss), geometric normal and index of the hit
-    triangle in its shape, rays from the origin. `intersect`: intersect_from_origin or a frozen one."""
+    triangle in its shape, rays from the origin. `shapes`: meshes, or slots (whose meshes are known by
+    their registry ids); `intersect`: intersect_from_origin or a frozen one."""
     if not dr.is_jit_v(mi.Float):
-        return _cast_rays_one_by_one(scene, shapes, dirs)
+        return _cast_rays_one_by_one(scene, [s.mesh if isinstance(s, MeshSlot) else s for s in shapes], dirs)
     d = mi.Vector3f(*(mi.Float(aligned(dirs[:, k].astype(np.float32))) for k in range(3)))
     t, hit_ids, nx, ny, nz, prim, valid = (
         np.asarray(x) for x in (intersect or intersect_from_origin)(scene, d)
@@ -381,7 +353,7 @@ def cast_rays(
     t = np.where(valid, t.astype(np.float64), np.inf)
     idx = np.full(len(dirs), -1, np.int64)
     if shapes:  # scene.shapes() is not in insertion order: map each hit's shape registry id to its index
-        ids = np.array([_registry_id(mi.ShapePtr(s))[0] for s in shapes])
+        ids = np.array([s.registry_id if isinstance(s, MeshSlot) else registry_id(s) for s in shapes])
         hit_ids = hit_ids.astype(np.int64)
         lut = np.full(max(int(ids.max()), int(hit_ids.max())) + 1, -1, np.int64)
         lut[ids] = np.arange(len(shapes))
@@ -411,11 +383,6 @@ def _cast_rays_one_by_one(
         if si.is_valid():
             t[i], idx[i], n[i], prim[i] = si.t, index.get(id(si.shape), -1), si.n, si.prim_index
     return t, idx, n, prim
-
-
-def _registry_id(ptr: mi.ShapePtr) -> np.ndarray:
-    """Dr.Jit stores shape pointers as registry ids: one vectorised comparison instead of one per shape."""
-    return np.asarray(dr.reinterpret_array(mi.UInt32, ptr)).astype(np.int64)
 
 
 def _occluded(scene: mi.Scene, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:

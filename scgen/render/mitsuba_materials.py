@@ -16,7 +16,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from scgen.render.mitsuba_slots import aligned
+from scgen.render.mitsuba_memory import aligned, overwrite, own_scalars
 from scgen.scenes.finish import finished
 from scgen.scenes.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
 
@@ -135,10 +135,15 @@ class TargetFinishes:
     """
 
     def __init__(self, per_class: int = 1) -> None:
-        # class drawn -> its BSDFs, each with its parameters (traversed once: a traversal costs 0.2 ms)
-        self._pools: dict[str, list[tuple[mi.BSDF, mi.SceneParameters]]] = {}
+        # class drawn -> its BSDFs, each with what a sample sets of it (FinishParameters)
+        self._pools: dict[str, list[tuple[mi.BSDF, FinishParameters]]] = {}
         for name, m in MATERIALS.items():
-            self._pools[name] = [(b, mi.traverse(b)) for b in (finish_bsdf(m) for _ in range(per_class))]
+            self._pools[name] = [self._kept(m) for _ in range(per_class)]
+
+    @staticmethod
+    def _kept(m: Material) -> tuple[mi.BSDF, FinishParameters]:
+        bsdf = finish_bsdf(m)
+        return bsdf, FinishParameters(bsdf, m)
 
     def pooled(self) -> list[tuple[str, mi.BSDF]]:
         """Every BSDF kept, with its name (as `bsdfs` names it)."""
@@ -156,10 +161,9 @@ class TargetFinishes:
             pool = self._pools.setdefault(drawn, [])
             k = taken[drawn] = taken.get(drawn, -1) + 1
             if k == len(pool):
-                bsdf = finish_bsdf(m)
-                pool.append((bsdf, mi.traverse(bsdf)))
+                pool.append(self._kept(m))
             else:
-                _set_finish(pool[k][1], m)
+                pool[k][1].set(m)
             out[part_class] = _pool_name(drawn, k), pool[k][0]
         return out
 
@@ -169,27 +173,57 @@ def _pool_name(drawn: str, k: int) -> str:
     return f"{drawn}_{k}"
 
 
-def _set_finish(params: mi.SceneParameters, m: Material) -> None:
-    """Set the parameters of a BSDF built by finish_bsdf for `m`'s class to `m`'s values: it renders what a
-    new one would."""
+class FinishParameters:
+    """What a sample sets of a BSDF built by finish_bsdf: its numbers (colour, roughness, metallic) are
+    written in place into memory of their own (mitsuba_memory; through mi.traverse, one kernel launch
+    each), its textures (the crinkle's normal map, the cells' colours) set through mi.traverse."""
+
+    def __init__(self, bsdf: mi.BSDF, m: Material) -> None:
+        self._params = mi.traverse(bsdf)  # traversed once: a traversal costs 0.2 ms
+        self._floats: list[mi.Float] = []  # the Floats of _numbers(m)'s parameters, in their order
+        if dr.is_jit_v(mi.Float):
+            keys = list(_numbers(m))
+            for key in keys:
+                value = self._params[key]
+                owned = own_scalars(f[0] for f in _floats(value))
+                self._params[key] = mi.Color3f(*owned) if isinstance(value, mi.Color3f) else owned[0]
+            self._params.update()
+            self._floats = [f for key in keys for f in _floats(self._params[key])]
+            live = mi.traverse(bsdf)  # the BSDF holds the memory given it, not copies of it
+            if [f.index for key in keys for f in _floats(live[key])] != [f.index for f in self._floats]:
+                raise RuntimeError("Mitsuba's BSDF did not keep the memory given it")
+
+    def set(self, m: Material) -> None:
+        """Set the BSDF to `m`'s values (a material of the class it was built for): it renders what a new
+        one would. The caller has waited for the kernels reading them (drjit.sync_thread)."""
+        numbers = _numbers(m)
+        if dr.is_jit_v(mi.Float):
+            overwrite(self._floats, [v for values in numbers.values() for v in values])
+        else:  # scalar_rgb: plain numbers, set the usual way
+            for key, values in numbers.items():
+                self._params[key] = mi.Color3f(*values) if len(values) == 3 else values[0]
+        if m.detail == "cells":
+            self._params["base_color.data"] = mi.TensorXf(aligned(cell_texture(m.base)))
+        if m.detail == "crinkle":
+            self._params["normalmap.data"] = crinkle_normal_tensor(CRINKLE_SLOPE * m.crinkle)
+        self._params.update()
+
+
+def _numbers(m: Material) -> dict[str, tuple[float, ...]]:
+    """The parameters of a BSDF built for `m`'s class that a sample sets to numbers, with `m`'s: its colour
+    (unless textured), roughness, and metallic where the class has any (setting it would mark the BSDF
+    metallic for good)."""
     inner = "nested_bsdf." if m.detail == "crinkle" else ""
-    if m.detail == "cells":
-        params["base_color.data"] = mi.TensorXf(aligned(cell_texture(m.base)))
-    else:
-        params[inner + "base_color.value"] = mi.Color3f(*(_opaque(c) for c in m.base))
-    params[inner + "roughness.value"] = _opaque(m.roughness)
-    if m.metallic:  # 0 for every draw of its class; setting it would mark the BSDF metallic for good
-        params[inner + "metallic.value"] = _opaque(m.metallic)
-    if m.detail == "crinkle":
-        params["normalmap.data"] = crinkle_normal_tensor(CRINKLE_SLOPE * m.crinkle)
-    params.update()
+    numbers = {} if m.detail == "cells" else {inner + "base_color.value": tuple(m.base)}
+    numbers[inner + "roughness.value"] = (m.roughness,)
+    if m.metallic:
+        numbers[inner + "metallic.value"] = (m.metallic,)
+    return numbers
 
 
-def _opaque(value: float) -> mi.Float:
-    """`value` as a Float of its own in memory: a literal would be shared with every equal literal alive,
-    and which parameters share one would then change from sample to sample, and with it the inputs'
-    layout a frozen render is replayed by (mitsuba_backend)."""
-    return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else value
+def _floats(value: Any) -> list[Any]:
+    """A Float parameter, or a Color3f's channels."""
+    return [value[c] for c in range(3)] if isinstance(value, mi.Color3f) else [value]
 
 
 def texture_scale(material: str, size: float) -> float:

@@ -6,6 +6,9 @@ tracing the path tracer costs (about 20 ms). So a slot is one mesh with one BSDF
 this sample's (unwelded: three corners each, in face order, as box_uv lays out their UVs), and the rest
 of its capacity NaN: Embree leaves triangles with non-finite corners out of its BVH, so the padding is
 never hit and costs little (a BVH rebuild took 0.7 ms longer with twelve empty 4716-triangle slots).
+A refill writes the mesh's buffers in place (mitsuba_memory) and tells the mesh nothing: its bounding box
+(thirteen kernel launches to compute, and read by nothing here) goes stale, and the scenes holding it are
+told to rebuild their BVH by the backend (MitsubaBackend._rebuild).
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-ALIGNMENT = 64  # bytes: the widest vector loads of Dr.Jit's LLVM backend (AVX-512)
+from scgen.render.mitsuba_memory import aligned, aligned_empty, overwrite
 
 
 def build_mesh(name: str, corners: np.ndarray, uv: np.ndarray, bsdf: mi.BSDF) -> mi.Mesh:
@@ -50,10 +53,20 @@ class MeshSlot:
         self._params = mi.traverse(self.mesh)
         self._params.keep(["vertex_positions", "vertex_texcoords", "faces"])
         self.capacity = capacity
+        self._registry_id: int | None = None
+
+    @property
+    def registry_id(self) -> int:
+        """The id by which Dr.Jit's ray casts name this mesh when they hit it (si.shape holds such ids);
+        asked once, as evaluating it launches a kernel."""
+        if self._registry_id is None:
+            self._registry_id = registry_id(self.mesh)
+        return self._registry_id
 
     def fill(self, corners: np.ndarray, uv: np.ndarray) -> None:
         """Hold these triangles (3F x 3 corners, 3F x 2 UVs); the capacity doubles until they fit, in new
-        buffers (the capacity is part of what a frozen render is keyed by)."""
+        buffers (the capacity is part of what a frozen render is keyed by). The caller has waited for the
+        kernels reading the buffers (drjit.sync_thread), and rebuilds the BVH of the scenes holding them."""
         n = len(corners) // 3
         if n == 0 and self.triangles == 0:
             return  # empty before and after: nothing to write
@@ -68,11 +81,14 @@ class MeshSlot:
             self._params.update()
             self.capacity = capacity
         else:
-            dr.sync_thread()  # no kernel still reads the buffers
-            np.asarray(self._params["vertex_positions"])[:] = positions.ravel()
-            np.asarray(self._params["vertex_texcoords"])[:] = texcoords.ravel()
-            self.mesh.parameters_changed(["vertex_positions", "vertex_texcoords"])
+            overwrite([self._params["vertex_positions"], self._params["vertex_texcoords"]],
+                      [positions.ravel(), texcoords.ravel()])  # fmt: skip
         self.triangles = n
+
+
+def registry_id(shape: mi.Shape) -> int:
+    """The id by which Dr.Jit's ray casts name a hit shape (si.shape holds these ids)."""
+    return int(np.asarray(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape)))[0])
 
 
 def _flat(values: np.ndarray) -> Any:
@@ -86,21 +102,4 @@ def _padded(values: np.ndarray, capacity: int, fill: float = np.nan) -> np.ndarr
     out = aligned_empty((3 * capacity, values.shape[1]), np.float32)
     out[: len(values)] = values
     out[len(values) :] = fill
-    return out
-
-
-def aligned_empty(shape: tuple[int, ...], dtype: type) -> np.ndarray:
-    """An uninitialised array whose memory starts on a 64-byte boundary. Dr.Jit takes numpy's memory as it
-    is, and notes whether it is aligned: a frozen render takes a change of that note for new inputs and
-    records again, and numpy's allocations fall on 16-byte boundaries, so the note would change."""
-    n, size = int(np.prod(shape)), np.dtype(dtype).itemsize
-    buffer = np.empty(n * size + ALIGNMENT, np.uint8)
-    start = -buffer.ctypes.data % ALIGNMENT
-    return buffer[start : start + n * size].view(dtype).reshape(shape)
-
-
-def aligned(values: np.ndarray) -> np.ndarray:
-    """A copy of `values` in memory from aligned_empty."""
-    out = aligned_empty(values.shape, values.dtype)
-    out[...] = values
     return out
