@@ -14,10 +14,11 @@ import numpy as np
 
 from scgen.render.conventions import CLIP_START_M, EARTHSHINE_COLOUR
 from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
-from scgen.render.mitsuba_memory import overwrite, own_scalars
+from scgen.render.mitsuba_memory import channels, check_held, overwrite, own_scalars
 from scgen.scenes.spec import SceneSpec
 
 ROTATION = [(r, c) for r in range(3) for c in range(3)]  # the entries of a light's frame that vary
+LIGHT_KEYS = ("to_world", "irradiance.value")  # what a directional light takes from each sample
 
 
 def sample_lights(spec: SceneSpec) -> dict[str, dict]:
@@ -69,17 +70,16 @@ class SceneLights:
         self._scene = scene
         self._radius = 0.0  # the half side of the cube the lights' bounding sphere encloses (none yet)
         self._params = mi.traverse(scene)
-        self._params.keep([f"{name}.{key}" for name in names for key in ("to_world", "irradiance.value")])
+        self._params.keep([f"{name}.{key}" for name in names for key in LIGHT_KEYS])
         self._arrays: dict[str, list[mi.Float]] = {}  # per light: the Floats overwritten (see _varying)
         if dr.is_jit_v(mi.Float):
             for name in names:
                 self._own(name)
             self._params.update()
             self._arrays = {name: _varying(self._params, name) for name in names}
-            live = mi.traverse(scene)  # the lights hold the memory given them, not copies of it
-            held = [a.index for name in names for a in _varying(live, name)]
-            if held != [a.index for name in names for a in self._arrays[name]]:
-                raise RuntimeError("Mitsuba's lights did not keep the memory given them")
+            live = mi.traverse(scene)
+            check_held([a for name in names for a in self._arrays[name]],
+                       [a for name in names for a in _varying(live, name)], "lights")  # fmt: skip
 
     def _own(self, name: str) -> None:
         """Give light `name`'s varying values memory of their own (see mitsuba_memory.own_scalars)."""
@@ -91,7 +91,7 @@ class SceneLights:
                 part[r][c] = value
             parts.append(part)
         self._params[f"{name}.to_world"] = mi.AffineTransform4f(*parts)
-        self._params[f"{name}.irradiance.value"] = mi.Color3f(*own_scalars(colour[k][0] for k in range(3)))
+        self._params[f"{name}.irradiance.value"] = mi.Color3f(*own_scalars(c[0] for c in channels(colour)))
 
     def set(self, lights: dict[str, dict], extent: float) -> None:
         """Give the lights these values (sample_lights' dicts, one per light of the scene), and the bounding
@@ -100,7 +100,7 @@ class SceneLights:
         if not dr.is_jit_v(mi.Float):  # scalar_rgb: its values are plain numbers, set the usual way
             for name, light in lights.items():
                 new = mi.traverse(mi.load_dict(light))
-                for key in ("to_world", "irradiance.value"):
+                for key in LIGHT_KEYS:
                     self._params[f"{name}.{key}"] = new[key]
             self._params.update()
         else:
@@ -117,7 +117,7 @@ def _varying(params: mi.SceneParameters, name: str) -> list[mi.Float]:
     """What a sample changes of light `name`: its frame's rotation (matrix, inverse transpose), irradiance."""
     frame, colour = params[f"{name}.to_world"], params[f"{name}.irradiance.value"]
     rotation = [part[r][c] for part in (frame.matrix, frame.inverse_transpose) for r, c in ROTATION]
-    return rotation + [colour[k] for k in range(3)]
+    return rotation + channels(colour)
 
 
 def light_radius(extent: float) -> float:

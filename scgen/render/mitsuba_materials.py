@@ -16,7 +16,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from scgen.render.mitsuba_memory import aligned, overwrite, own_scalars
+from scgen.render.mitsuba_memory import aligned, channels, check_held, overwrite, own_scalars
 from scgen.scenes.finish import finished
 from scgen.scenes.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
 
@@ -185,13 +185,12 @@ class FinishParameters:
             keys = list(_numbers(m))
             for key in keys:
                 value = self._params[key]
-                owned = own_scalars(f[0] for f in _floats(value))
+                owned = own_scalars(f[0] for f in channels(value))
                 self._params[key] = mi.Color3f(*owned) if isinstance(value, mi.Color3f) else owned[0]
             self._params.update()
-            self._floats = [f for key in keys for f in _floats(self._params[key])]
-            live = mi.traverse(bsdf)  # the BSDF holds the memory given it, not copies of it
-            if [f.index for key in keys for f in _floats(live[key])] != [f.index for f in self._floats]:
-                raise RuntimeError("Mitsuba's BSDF did not keep the memory given it")
+            self._floats = [f for key in keys for f in channels(self._params[key])]
+            live = mi.traverse(bsdf)
+            check_held(self._floats, [f for key in keys for f in channels(live[key])], "BSDF")
 
     def set(self, m: Material) -> None:
         """Set the BSDF to `m`'s values (a material of the class it was built for): it renders what a new
@@ -219,11 +218,6 @@ def _numbers(m: Material) -> dict[str, tuple[float, ...]]:
     if m.metallic:
         numbers[inner + "metallic.value"] = (m.metallic,)
     return numbers
-
-
-def _floats(value: Any) -> list[Any]:
-    """A Float parameter, or a Color3f's channels."""
-    return [value[c] for c in range(3)] if isinstance(value, mi.Color3f) else [value]
 
 
 def texture_scale(material: str, size: float) -> float:

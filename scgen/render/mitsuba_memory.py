@@ -44,6 +44,18 @@ def own_scalars(values: Iterable[float]) -> list[mi.Float]:
     return arrays
 
 
+def channels(value: Any) -> list[Any]:
+    """A Float parameter as a list of itself, or a Color3f's three channels."""
+    return [value[c] for c in range(3)] if isinstance(value, mi.Color3f) else [value]
+
+
+def check_held(given: list[Any], held: list[Any], owner: str) -> None:
+    """Raise unless `held` (read back from a fresh mi.traverse of the owner) are the very arrays `given`
+    it: had Mitsuba copied them, writing the given ones in place would change nothing it renders."""
+    if [a.index for a in held] != [a.index for a in given]:
+        raise RuntimeError(f"Mitsuba's {owner} holds copies of the arrays given, not the arrays")
+
+
 def check_distinct(arrays: list[Any]) -> None:
     """Raise unless these Dr.Jit arrays are distinct variables: one memory written for two values would
     set both."""
