@@ -55,16 +55,17 @@ def test_spnv2_dropout_and_sun_flare_fall_inside_the_target_box() -> None:
     x0, y0, x1, y1 = (round(v * res) for v in box)
     grey = np.full((res, res, 3), 90, np.uint8)
     dropout, flare = spnv2_chain(box, res)[1:3]
+    drop_chain, flare_chain = composed([dropout]), A.Compose([flare], save_applied_params=True)
     holes_seen, suns_seen = 0, 0
     for seed in range(12):  # each applies with p 0.5
-        for transform in (dropout, flare):
+        for transform in (dropout, flare):  # after composing: a Compose draws fresh seeds for its transforms
             transform.set_random_seed(seed)
-        holes = composed([dropout])(image=grey, bboxes=[box], labels=["target"])["image"]
+        holes = drop_chain(image=grey, bboxes=[box], labels=["target"])["image"]
         rows, cols = np.nonzero((holes != grey).any(-1))
         if len(rows):
             holes_seen += 1
             assert rows.min() >= y0 - 1 and rows.max() <= y1 and cols.min() >= x0 - 1 and cols.max() <= x1
-        applied = A.Compose([flare], save_applied_params=True)(image=grey)["applied_transforms"]
+        applied = flare_chain(image=grey)["applied_transforms"]
         if applied:
             suns_seen += 1
             u, v = applied[0][1]["flare_center"]  # the sun's position

@@ -81,7 +81,8 @@ def gdrnet_occlusion_chain() -> list[A.BasicTransform]:
 
 
 def composed(transforms: list[A.BasicTransform]) -> A.Compose:
-    """The transforms in order, given the target's box: call with image=, bboxes=[box], labels=["target"]."""
+    """The transforms in order, given the target's box: call with image=, bboxes=[box], labels=["target"].
+    Seed its transforms after composing: a Compose gives them fresh seeds of its own."""
     return A.Compose(transforms, bbox_params=A.BboxParams(format="albumentations", label_fields=["labels"]))
 
 
