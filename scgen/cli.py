@@ -104,7 +104,13 @@ def main() -> None:
     "--split", "split_text", default="0.7,0.1,0.2", show_default=True, help="train,val,test ratios."
 )
 @click.option("--shard", "shard_text", default="0/1", show_default=True, help="Render only shard i of N.")
-@click.option("--workers", type=int, default=None, help="Worker processes/actors (default: CPU cores).")
+@click.option(
+    "--workers",
+    type=int,
+    default=None,
+    help="Worker processes/actors (default: CPU cores). Blender's workers share the cores; Mitsuba's "
+    "render on one thread each, so that its images are the same whatever the count.",
+)
 @click.option(
     "--executor",
     type=click.Choice(["local", "ray"]),

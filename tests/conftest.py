@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,8 @@ from scgen.run.runner import RenderJob, run_render
 from scgen.scenes.model import TargetModel, load_target
 
 SMALL = (320, 240)
+# albumentations asks PyPI for a newer version on import (2 s timeout): tests stay off the network
+os.environ.setdefault("NO_ALBUMENTATIONS_UPDATE", "1")
 
 
 def render_dataset(out: Path, n: int, seed: int = 0, **kwargs) -> Path:

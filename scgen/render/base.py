@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 from typing import Protocol
 
 from scgen.errors import ScgenError
@@ -11,6 +12,9 @@ from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
 BACKENDS = ("blender", "mitsuba")
+# Mitsuba's film sums a pixel's samples by atomic adds, in no fixed order across threads (now and then one
+# level apart): an image rendered on one thread is the same whatever the worker count or shard
+MITSUBA_THREADS = 1
 
 
 class Backend(Protocol):
@@ -51,9 +55,10 @@ def create_backend(
 ) -> Backend:
     """Instantiate a backend by name; raises ScgenError for unknown names or a missing renderer.
 
-    `threads` caps the renderer's CPU threads (several workers share the cores); None = all cores.
+    `threads`: the renderer's CPU threads; None = the backend's default for one worker (renderer_threads).
     """
     check_backend(name)  # the device is the backend's to choose (Blender probes the GPUs once)
+    threads = renderer_threads(name, 1, threads)
     if name == "mitsuba":
         from scgen.render.mitsuba_backend import MitsubaBackend
 
@@ -61,3 +66,11 @@ def create_backend(
     from scgen.render.blender import BlenderBackend
 
     return BlenderBackend(model, quality=quality, device=device, threads=threads)
+
+
+def renderer_threads(name: str, workers: int, threads: int | None = None) -> int:
+    """CPU threads for the renderer of each of `workers` workers: `threads` when given; else Blender's share
+    of the cores (Cycles' pixels do not depend on its thread count) and Mitsuba's MITSUBA_THREADS."""
+    if threads:
+        return threads
+    return MITSUBA_THREADS if name == "mitsuba" else max(1, (os.cpu_count() or 1) // workers)

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from scgen.render.backgrounds import background_image
+from scgen.render.base import renderer_threads
 from scgen.render.blender_env import import_bpy, select_device
 from scgen.render.blender_scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender_settings import preset
@@ -78,7 +79,8 @@ class BlenderBackend:
         if self._rays is None:
             from scgen.render.mitsuba_backend import MitsubaBackend
 
-            self._rays = MitsubaBackend(self._model, threads=self._threads)
+            # its casts are the same on any number of threads
+            self._rays = MitsubaBackend(self._model, threads=renderer_threads(self.name, 1, self._threads))
         return self._rays
 
     def close(self) -> None:

@@ -24,6 +24,7 @@ import numpy as np
 from trimesh.transformations import transform_points
 
 from scgen.render.backgrounds import background_image
+from scgen.render.base import MITSUBA_THREADS
 from scgen.render.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.camera import record_image, render_camera
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, check_quality, render_seed
@@ -69,10 +70,10 @@ class MitsubaBackend:
 
     name = "mitsuba"
 
-    def __init__(self, model: TargetModel, quality: str = "default", threads: int | None = None) -> None:
+    def __init__(self, model: TargetModel, quality: str = "default", threads: int = MITSUBA_THREADS) -> None:
+        """`threads`: Dr.Jit's CPU threads, for the whole process (above MITSUBA_THREADS, see there)."""
         self.variant = select_variant()
-        if threads is not None:
-            dr.set_thread_count(threads)
+        dr.set_thread_count(threads)
         self.model = model
         check_quality(quality)
         self.spp = QUALITY_SPP[quality]

@@ -22,7 +22,7 @@ from scgen.dataset.splits import SPLITS, plan_splits, split_lists
 from scgen.dataset.writer import WriteOptions, dataset_depth_scale, existing_sample_ids, finalize
 from scgen.errors import ScgenError
 from scgen.generator import Generator
-from scgen.render.base import check_backend
+from scgen.render.base import check_backend, renderer_threads
 from scgen.render.conventions import check_quality
 from scgen.run.executors import run_local, run_ray
 from scgen.run.parent_watch import spawn_pool
@@ -51,7 +51,7 @@ class RenderJob:
     ratios: tuple[float, float, float] = (0.7, 0.1, 0.2)
     shard: tuple[int, int] = (0, 1)
     workers: int = 1
-    threads: int | None = None  # renderer threads per worker; None = cores // workers
+    threads: int | None = None  # renderer threads per worker; None = the backend's (renderer_threads)
     executor: str = "local"
     ray_address: str | None = None
     write: WriteOptions = field(default_factory=WriteOptions)
@@ -101,7 +101,7 @@ def make_plan(job: RenderJob) -> Plan:
     generator = Generator.load(
         job.model_path, job.config_path, job.seed, job.resolution, job.keep_scale, job.overrides, job.camera,
         backend=job.backend, quality=job.quality, device=job.device,
-        threads=job.threads or max(1, (os.cpu_count() or 1) // job.workers),
+        threads=renderer_threads(job.backend, job.workers, job.threads),
     )  # fmt: skip
     if job.write.rgb_format == "jpg" and generator.cfg["camera"]["output"]["bits"] != 8:
         raise ScgenError("--rgb-format jpg holds 8 bits only: camera.output.bits is 16 (use png)")
