@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from scgen.render.backgrounds import background_image
-from scgen.render.base import renderer_threads
 from scgen.render.blender_env import import_bpy, select_device
 from scgen.render.blender_scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender_settings import preset
@@ -53,7 +52,7 @@ class BlenderBackend:
         gpu = self.device != "CPU"
         self.scene = BlenderScene(self._bpy, model, quality_preset, gpu, threads, self._workdir)
         self._hull = np.asarray(model.mesh.convex_hull.vertices, np.float64)
-        self._model, self._threads, self._rays = model, threads, None
+        self._model, self._rays = model, None
 
     @property
     def cycles_s(self) -> float:
@@ -79,8 +78,7 @@ class BlenderBackend:
         if self._rays is None:
             from scgen.render.mitsuba_backend import MitsubaBackend
 
-            # its casts are the same on any number of threads
-            self._rays = MitsubaBackend(self._model, threads=renderer_threads(self.name, 1, self._threads))
+            self._rays = MitsubaBackend(self._model)  # Dr.Jit's threads are per process: Mitsuba's default
         return self._rays
 
     def close(self) -> None:
