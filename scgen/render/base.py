@@ -8,13 +8,11 @@ from typing import Protocol
 
 from scgen.errors import ScgenError
 from scgen.render.buffers import Buffers
+from scgen.render.conventions import MITSUBA_THREADS
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
 BACKENDS = ("blender", "mitsuba")
-# Mitsuba's film sums a pixel's samples by atomic adds, in no fixed order across threads (now and then one
-# level apart): an image rendered on one thread is the same whatever the worker count or shard
-MITSUBA_THREADS = 1
 
 
 class Backend(Protocol):

@@ -24,10 +24,9 @@ import numpy as np
 from trimesh.transformations import transform_points
 
 from scgen.render.backgrounds import background_image
-from scgen.render.base import MITSUBA_THREADS
 from scgen.render.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.camera import record_image, render_camera
-from scgen.render.conventions import CLIP_END_M, CLIP_START_M, check_quality, render_seed
+from scgen.render.conventions import CLIP_END_M, CLIP_START_M, MITSUBA_THREADS, check_quality, render_seed
 from scgen.render.mitsuba_lights import SceneLights, light_radius, sample_lights
 from scgen.render.mitsuba_llvm import mitsuba_setup
 from scgen.render.mitsuba_materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
