@@ -3,9 +3,10 @@ kernels each sample launches and compiles; then, at 640x480, throughput, time ou
 per sample by file kind and the float16-vs-float32 xyz storage error.
 
 Each size renders in a fresh worker process, as `scgen render` runs it (scgen.run.parent_watch.spawn_pool),
-with --threads renderer threads: a worker of `scgen render --workers W` on C cores has C // W. With more than
-one, Dr.Jit's idle pool threads busy-wait for a while after each kernel before they sleep, on cores the
-worker's own numpy work (backgrounds, the camera stage) then shares.
+with --threads renderer threads: one unless given, as a worker of `scgen render` renders
+(MITSUBA_THREADS). With more than one, Dr.Jit's idle pool threads busy-wait for a while after each kernel
+before they sleep, on cores the worker's own numpy work (backgrounds, the camera stage) then shares, and
+the images are not repeatable.
 Usage: python benchmarks/bench_mitsuba.py [--n 30] [--warmup 200] [--sizes 64x48,320x240] [--threads N]
        [--full-n 30] [--out DIR]
 """
@@ -165,7 +166,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--full-n", type=int, default=30, help="samples at 640x480 (0: skip)")
     ap.add_argument("--quality", default="default")
-    ap.add_argument("--threads", type=int, default=None, help="renderer threads per worker [all cores]")
+    ap.add_argument("--threads", type=int, default=None, help="renderer threads per worker [one]")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     sizes = [(int(w), int(h)) for w, h in (s.split("x") for s in args.sizes.split(","))]

@@ -25,8 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def render(code: Path, out: Path, backend: str, n: int, seed: int, resolution: str) -> None:
     """`scgen render` of the job with the scgen package found in `code`."""
     env = {**os.environ, "PYTHONPATH": str(code)}
-    # a worker per core, each rendering on one thread: with more, Mitsuba's film sums each pixel's samples
-    # from its threads by atomic adds in no fixed order, which moves a pixel by a level now and then
+    # a worker per core, as `scgen render` runs by default (and the code before the Mitsuba thread default,
+    # 2150d39, ran its workers on one thread each only then)
     options = {"--n": n, "--seed": seed, "--out": out, "--backend": backend, "--resolution": resolution,
                "--quality": "draft", "--workers": os.cpu_count() or 1}  # fmt: skip
     command = [
