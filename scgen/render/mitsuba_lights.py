@@ -108,9 +108,10 @@ class SceneLights:
                 matrix, inverse_transpose = directional_frame(light["direction"])
                 values = [m[r, c] for m in (matrix, inverse_transpose) for r, c in ROTATION]
                 overwrite(self._arrays[name], [*values, *irradiance_rgb(light)])
-        if light_radius(extent) != self._radius:
-            self._radius = light_radius(extent)
-            steady_light_bounds(self._scene, self._radius)
+        radius = light_radius(extent)
+        if radius != self._radius:
+            self._radius = radius
+            steady_light_bounds(self._scene, radius)
 
 
 def _varying(params: mi.SceneParameters, name: str) -> list[mi.Float]:
