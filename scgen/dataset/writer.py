@@ -29,6 +29,7 @@ from scgen.dataset.bop import read_json
 from scgen.dataset.exr import encode_xyz_exr
 from scgen.dataset.layout import CHUNK, OBJ_ID, Layout, dumps
 from scgen.render.buffers import Buffers, CameraRecord
+from scgen.scenes.attitude import CONE_COLUMNS
 from scgen.scenes.config import distance_range_m
 from scgen.scenes.factors import FLARE_LABELS, noise_group, occluder_config, spec_key, viewpoint_cell
 from scgen.scenes.finish import finish_group
@@ -204,6 +205,7 @@ def build_record(
         "saturated": camera.saturated if camera else 0.0,
         "finish": finish_group(spec.finish),
         **sky_labels(spec.background.params),
+        **(spec.cone.labels() if spec.cone else {}),
     }
     scene_camera = {"cam_K": list(spec.camera.K), "depth_scale": depth_scale, "exposure_ev": exposure_ev}
     if not spec.camera.pinhole:
@@ -227,15 +229,17 @@ def finalize(layout: Layout) -> int:
     for path in layout.record_paths():
         by_chunk[int(path.stem) // CHUNK].append(path)
     out = io.StringIO()
-    writer = csv.DictWriter(out, fieldnames=METADATA_COLUMNS, lineterminator="\n")
-    writer.writeheader()
+    writer: csv.DictWriter | None = None
     images: list[TargetImage] = []
     for chunk in sorted(by_chunk):
         records = sorted((read_json(p) for p in by_chunk[chunk]), key=lambda r: r["sample_id"])
         by_split: dict[str, list[dict[str, Any]]] = defaultdict(list)
         for r in records:
             by_split[r["split"]].append(r)
-            writer.writerow({k: _fmt(r["metadata"][k]) for k in METADATA_COLUMNS})
+            if writer is None:
+                writer = csv.DictWriter(out, fieldnames=metadata_columns(r), lineterminator="\n")
+                writer.writeheader()
+            writer.writerow({k: _fmt(r["metadata"][k]) for k in writer.fieldnames})
         for split, recs in by_split.items():
             d = layout.chunk_dir(split, recs[0]["sample_id"])
             for name in bop.SCENE_FILES:
@@ -243,10 +247,18 @@ def finalize(layout: Layout) -> int:
                     bop.scene_file(d, name), dumps({str(r["sample_id"]): r[name] for r in recs})
                 )
         images += target_images(by_split.get(bop.TEST_SPLIT, []))
+    if writer is None:  # no sample yet: the header alone
+        csv.DictWriter(out, fieldnames=METADATA_COLUMNS, lineterminator="\n").writeheader()
     for kind, targets in target_lists(images).items():
         atomic_write_text(layout.test_targets(kind), dumps(targets))
     atomic_write_text(layout.metadata_path, out.getvalue())
     return sum(len(paths) for paths in by_chunk.values())
+
+
+def metadata_columns(record: dict[str, Any]) -> tuple[str, ...]:
+    """metadata.csv's columns for a dataset holding `record`: every dataset's, then a cone attitude's
+    (scgen.scenes.attitude.CONE_COLUMNS) when its samples were drawn in a cone."""
+    return METADATA_COLUMNS + (CONE_COLUMNS if CONE_COLUMNS[0] in record["metadata"] else ())
 
 
 TargetImage = tuple[int, int, list[dict[str, Any]], list[dict[str, Any]]]  # scene, image, scene_gt, gt_info

@@ -16,6 +16,7 @@ from typing import Any
 import yaml
 
 from scgen.errors import ScgenError
+from scgen.scenes.attitude import check_pose
 from scgen.scenes.camera_config import DEFAULT_CAMERA, camera_preset, check_camera, scale_pixel_sizes
 from scgen.scenes.checks import check_prob, check_range, is_number
 from scgen.scenes.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
@@ -34,6 +35,13 @@ DEFAULT_CONFIG: dict[str, Any] = {
         "min_px": 60.0,
         "max_px": 300.0,
         "range_m": None,
+    },
+    "pose": {
+        # the target's attitude: uniform over SO(3), or cone, a rendezvous corridor (scgen.scenes.attitude)
+        "distribution": "uniform",
+        "nominal": [1.0, 0.0, 0.0, 0.0],  # cone: the allocentric attitude on its axis, quaternion w, x, y, z
+        "max_angle_deg": 20.0,  # cone: the line of sight within this angle of the nominal one
+        "roll_deg": [-20.0, 20.0],  # cone: roll about the line of sight from the nominal one
     },
     "position": {
         # the target centre stays at least this fraction of its projected radius inside the frame
@@ -231,6 +239,7 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
     else:
         check_range("distance.range_m", dist["range_m"], low=1e-6)
 
+    check_pose(cfg["pose"])
     occ = cfg["occluders"]
     for name in ("depth_frac", "size_rel"):
         check_range(f"occluders.{name}", occ[name], low=1e-6)

@@ -6,13 +6,13 @@ from typing import Any
 
 import numpy as np
 
+from scgen.scenes.attitude import sample_attitude
 from scgen.scenes.config import USER_BACKGROUND, distance_range_m
 from scgen.scenes.finish import sample_finish
 from scgen.scenes.geometry import (
     backproject,
     orthonormal_basis,
     random_direction_in_cone,
-    random_rotation,
     unit_sphere_hits,
 )
 from scgen.scenes.imaging import sample_imaging
@@ -47,8 +47,6 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
     K = camera.K_mat
     f = camera.focal
 
-    R = random_rotation(factor_rng(seed, index, "pose"))
-
     # the camera-target distance |t| is uniform over its range (the factor the robustness table bins)
     d_min, d_max = distance_range_m(cfg, diameter_m)
     distance = float(factor_rng(seed, index, "distance").uniform(d_min, d_max))
@@ -60,6 +58,7 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
     v = pos_rng.uniform(margin, camera.height - 1 - margin)
     ray = backproject(K, u, v, 1.0)
     t = distance * ray / np.linalg.norm(ray)
+    R, cone = sample_attitude(factor_rng(seed, index, "pose"), cfg["pose"], t)
     target_cam = shape.in_camera(R, t)
     view = camera_view(K, camera.width, camera.height, target_cam)
 
@@ -89,6 +88,7 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
         shadow_caster=bool(caster),
         imaging=sample_imaging(factor_rng(seed, index, "camera"), cfg["camera"]),
         finish=sample_finish(factor_rng(seed, index, "finish"), cfg["finish"]),
+        cone=cone,
     )
 
 

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from scgen.scenes.attitude import ConeDraw
 from scgen.scenes.geometry import focal_length, project
 from scgen.scenes.lens import distort, is_pinhole, undistort
 
@@ -174,13 +175,18 @@ class SceneSpec:
     shadow_caster: bool
     imaging: ImagingSpec | None = None  # None: the ideal camera (no stage draws)
     finish: dict[str, dict[str, Any]] = field(default_factory=dict)  # scgen.scenes.finish; {}: nominal
+    cone: ConeDraw | None = None  # a cone attitude's place in its corridor (scgen.scenes.attitude)
 
     @property
     def occluders(self) -> tuple[PropSpec, ...]:
         return tuple(p for p in self.props if p.role == "occluder")
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """Plain data; `cone` only when drawn, so a uniform attitude's record is what it always was."""
+        d = asdict(self)
+        if self.cone is None:
+            del d["cone"]
+        return d
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> SceneSpec:
@@ -214,4 +220,5 @@ class SceneSpec:
             shadow_caster=bool(d["shadow_caster"]),
             imaging=ImagingSpec(**d["imaging"]) if d.get("imaging") else None,
             finish=d.get("finish", {}),
+            cone=ConeDraw(**d["cone"]) if d.get("cone") else None,
         )
