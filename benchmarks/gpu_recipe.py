@@ -11,8 +11,8 @@ The same chain on a CPU in a few minutes (CI runs it: tests/test_gpu_recipe.py):
 The chain:
 1. render --n samples with every core into OUT/data (Blender where bpy imports, else Mitsuba; a render
    already there is resumed);
-2. time a short probe run of the training config (OUT/probe), then train it into OUT/run with as many
-   whole epochs as fit --train-minutes at the probe's step time, so its schedule ends (cosine to 0);
+2. train the config into OUT/run within --train-minutes (`posenet train --minutes`: the schedule is
+   fitted while it runs, so that its cosine ends at the budget; posenet.budget);
 3. evaluate the test split at ground-truth boxes (Patch-PnP): the summary, ADD@0.02 m per factor group
    (`scgen stats --sample-groups`) and the batch-1 latency of the network;
 4. write OUT/report.md and OUT/report.json, and print the report.
@@ -27,7 +27,6 @@ import argparse
 import json
 import os
 import shutil
-import statistics
 import sys
 import time
 from dataclasses import dataclass
@@ -37,12 +36,11 @@ from typing import Any
 import torch
 
 from posenet.bench import device_label
-from posenet.config import TrainConfig, config_from_dict
-from posenet.data import open_split
+from posenet.config import config_from_dict
 from posenet.errors import PosenetError
 from posenet.evaluate import by_factor, by_factor_table, evaluate, format_table, summary_rows
 from posenet.models.backbone import initial_weights
-from posenet.train import LAST, LOG_FILE, steps_per_epoch, train
+from posenet.train import LAST, LOG_FILE, train
 from scgen.dataset.atomic import atomic_write_text
 from scgen.dataset.stats import sample_groups
 from scgen.errors import ScgenError
@@ -60,7 +58,6 @@ class Recipe:
     quality: str
     config: dict[str, Any]  # the training config (a config file's content)
     train_minutes: float
-    probe_steps: int  # steps timed before the schedule is fitted to the budget
     groups_n: int  # test images per factor group at most
     eval_workers: int
 
@@ -75,7 +72,6 @@ FULL = Recipe(
         "optim": {"amp": "bf16", "ckpt_every": 10},
     },
     train_minutes=25.0,
-    probe_steps=40,
     groups_n=500,
     eval_workers=max(0, min(8, CORES - 2)),
 )
@@ -96,7 +92,6 @@ TINY = Recipe(
         "optim": {"amp": "bf16", "batch_size": 4, "warmup_iters": 10, "ckpt_every": 100},
     },
     train_minutes=0.25,
-    probe_steps=6,
     groups_n=50,
     eval_workers=0,
 )
@@ -130,7 +125,6 @@ def recipe_of(args: argparse.Namespace) -> Recipe:
         quality=base.quality,
         config=config,
         train_minutes=args.train_minutes or base.train_minutes,
-        probe_steps=base.probe_steps,
         groups_n=base.groups_n,
         eval_workers=base.eval_workers,
     )
@@ -156,29 +150,6 @@ def render(out: Path, recipe: Recipe, seed: int) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def step_seconds(run: Path, skip: int) -> float:
-    """The mean step time (loading stalls included) of a run's log after its first `skip` steps (start-up,
-    warm-up kernels)."""
-    rows = [json.loads(line) for line in (run / LOG_FILE).read_text().splitlines()]
-    return statistics.mean(r["step_s"] for r in rows[skip:] or rows)
-
-
-def fit_schedule(data: Path, out: Path, cfg: TrainConfig, recipe: Recipe) -> tuple[TrainConfig, int, float]:
-    """(config with its epochs fitted to the budget, steps, probe step time): a probe run of
-    `probe_steps` gives the step time; the schedule is the whole epochs that fit, at least one (then cut
-    to the budget's steps)."""
-    probe = out / "probe"
-    shutil.rmtree(probe, ignore_errors=True)
-    train(data, probe, cfg, max_steps=recipe.probe_steps)
-    step_s = step_seconds(probe, skip=recipe.probe_steps // 3)
-    shutil.rmtree(probe)
-    n_train = len(open_split(data, "train", cfg.data, cfg.model_config(), train=True))
-    per_epoch = steps_per_epoch(n_train, cfg.optim)
-    budget = max(1, int(recipe.train_minutes * 60 / step_s))
-    cfg.optim.epochs = max(1, budget // per_epoch)
-    return cfg, min(budget, cfg.optim.epochs * per_epoch), step_s
-
-
 def report_text(r: dict[str, Any], summary_table: str, factor_table: str) -> str:
     """The report as Markdown."""
     d, t, e = r["dataset"], r["training"], r["evaluation"]
@@ -189,7 +160,7 @@ def report_text(r: dict[str, Any], summary_table: str, factor_table: str) -> str
         f"- dataset: {d['n']} samples, seed {d['seed']}, {d['resolution']}, {d['backend']}/{d['quality']}, "
         f"{d['workers']} workers: {d['rendered']} rendered in {d['seconds']:.0f} s; splits {d['splits']}",
         f"- training: {t['variant']}, preset {t['preset']}, precision {t['amp']}, batch {t['batch_size']}; "
-        f"{t['steps']} steps ({t['epochs']} epochs) at {1000 * t['step_s_probe']:.0f} ms a step (probe), "
+        f"{t['steps']} steps fitted ({t['steps_run']} run), {1000 * t['step_s']:.0f} ms a step; "
         f"{t['seconds'] / 60:.1f} min for a {t['budget_minutes']:g} min budget; "
         f"final loss {t['final_loss']:.4f}",
         f"- evaluation: test split, ground-truth boxes, Patch-PnP; {e['seconds']:.0f} s",
@@ -222,13 +193,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     data = args.out / "data"
     dataset = render(data, recipe, args.seed)
 
-    cfg, steps, step_s = fit_schedule(data, args.out, cfg, recipe)
     run_dir = args.out / "run"
     shutil.rmtree(run_dir, ignore_errors=True)
     t_train = time.perf_counter()
-    ckpt = train(data, run_dir, cfg, max_steps=steps)
+    ckpt = train(data, run_dir, cfg, minutes=recipe.train_minutes)
     train_s = time.perf_counter() - t_train
     final = json.loads((run_dir / LOG_FILE).read_text().splitlines()[-1])
+    state = torch.load(ckpt, weights_only=True)
 
     t_eval = time.perf_counter()
     result = evaluate(data, ckpt, "test", workers=recipe.eval_workers)
@@ -244,9 +215,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "device": device_label(device),
         "dataset": dataset,
         "training": {
-            "variant": cfg.variant, "preset": cfg.preset, "amp": torch.load(ckpt, weights_only=True)["amp"],
-            "batch_size": cfg.optim.batch_size, "steps": steps, "epochs": cfg.optim.epochs,
-            "step_s_probe": step_s, "seconds": train_s, "budget_minutes": recipe.train_minutes,
+            "variant": cfg.variant, "preset": cfg.preset, "amp": state["amp"],
+            "batch_size": cfg.optim.batch_size, "steps": state["schedule_steps"], "steps_run": final["step"],
+            "step_s": train_s / final["step"],
+            "seconds": train_s, "budget_minutes": recipe.train_minutes,
             "final_loss": final["loss"], "checkpoint": str(ckpt),
         },
         "evaluation": {

@@ -36,6 +36,11 @@ class Precision:
         """float32, bf16 or fp16."""
         return "float32" if self.mode == "off" else self.mode
 
+    def loss_scale(self) -> float:
+        """fp16's current loss scale (1 where the scaler is off). GradScaler halves it exactly when it
+        skips an optimizer step (its scaled gradients overflowed), so a fall tells a skipped step."""
+        return self.scaler.get_scale() if self.scaler.is_enabled() else 1.0
+
     def autocast(self) -> contextlib.AbstractContextManager:
         """Autocast to the run's dtype (a no-op in float32)."""
         if self.mode == "off":

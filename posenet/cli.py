@@ -65,6 +65,13 @@ def main() -> None:
     "--max-steps", type=click.IntRange(min=1), default=None, help="Stop after N steps (schedule unchanged)."
 )
 @click.option(
+    "--minutes",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Wall-time budget: the schedule is fitted while it runs so that its cosine ends after M minutes "
+    "(set-up included); the fitted steps are printed. A new run only: no --resume or --max-steps.",
+)
+@click.option(
     "--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config is given)."
 )
 @click.option(
@@ -87,6 +94,7 @@ def train(
     variant: str | None,
     epochs: int | None,
     max_steps: int | None,
+    minutes: float | None,
     resume: bool,
     obj_id: int | None,
     amp: str | None,
@@ -96,7 +104,7 @@ def train(
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "paper"
     cfg = load_config(config, variant=variant, epochs=epochs, obj_id=obj_id, amp=amp)
-    ckpt = run_train(data, out, cfg, resume=resume, max_steps=max_steps)
+    ckpt = run_train(data, out, cfg, resume=resume, max_steps=max_steps, minutes=minutes)
     if os.environ.get("RANK", "0") == "0":  # torchrun: one line, not one per process
         click.echo(f"checkpoint: {ckpt}")
 

@@ -11,6 +11,7 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,6 +27,7 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from posenet.amp import Precision
+from posenet.budget import PROBE_STEPS, TimeBudget
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
 from posenet.config import OptimConfig, TrainConfig, config_from_dict
 from posenet.data import EpochSampler, PoseDataset, open_split
@@ -85,9 +87,10 @@ def before_loader_fork() -> None:
 
 
 def make_optimizer(
-    model: torch.nn.Module, o: OptimConfig, total_iters: int
+    model: torch.nn.Module, o: OptimConfig, total_iters: int | Callable[[], int]
 ) -> tuple[torch.optim.Optimizer, LambdaLR]:
-    """Ranger (timm's Lookahead over RAdam) and the per-iteration warmup + flat + cosine schedule."""
+    """Ranger (timm's Lookahead over RAdam) and the per-iteration warmup + flat + cosine schedule over
+    `total_iters` steps (a callable: read at every step, for a schedule fitted while it runs)."""
     optimizer = create_optimizer_v2(
         model,
         opt="lookahead_radam",
@@ -98,7 +101,8 @@ def make_optimizer(
         decoupled_weight_decay=True,  # Ranger decays weights directly (p -= lr * wd * p)
         filter_bias_and_bn=not o.decay_norms_biases,  # timm's no-decay group: biases and 1-d (norm) weights
     )
-    return optimizer, LambdaLR(optimizer, lambda it: lr_factor(it, total_iters, o))
+    total = total_iters if callable(total_iters) else lambda: total_iters
+    return optimizer, LambdaLR(optimizer, lambda it: lr_factor(it, total(), o))
 
 
 @torch.no_grad()
@@ -151,7 +155,7 @@ def _to(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch
 class RunLog:
     """Rank 0's step log (JSONL), TensorBoard scalars and progress bar."""
 
-    def __init__(self, out: Path, step: int, total: int, every: int) -> None:
+    def __init__(self, out: Path, step: int, total: int | None, every: int) -> None:
         path = out / LOG_FILE
         kept = (
             [ln for ln in path.read_text().splitlines() if json.loads(ln)["step"] <= step]
@@ -218,13 +222,21 @@ def train_step(
 
 
 def train(
-    data: Path, out: Path, cfg: TrainConfig, resume: bool = False, max_steps: int | None = None
+    data: Path,
+    out: Path,
+    cfg: TrainConfig,
+    resume: bool = False,
+    max_steps: int | None = None,
+    minutes: float | None = None,
 ) -> Path:
-    """Train on `data`'s train split into `out`; returns the path of the last checkpoint."""
+    """Train on `data`'s train split into `out`; returns the path of the last checkpoint. With `minutes`,
+    the schedule is fitted to end when that much wall time has passed since this call (posenet.budget)."""
+    budget = TimeBudget(60 * minutes, cfg.optim.anneal_point) if minutes is not None else None
     rank, world, device = _init_distributed()
     try:
-        run = _set_up(data, out, cfg, resume, max_steps, rank, world, device)
-        log = _open_run_folder(out, cfg, run.step, run.stop) if rank == 0 else None
+        run = _set_up(data, out, cfg, resume, max_steps, rank, world, device, budget)
+        # a time budget's length is known once fitted
+        log = _open_run_folder(out, cfg, run.step, None if budget else run.stop) if rank == 0 else None
         try:
             _loop(run, out / LAST if rank == 0 else None, log)
         finally:
@@ -254,6 +266,7 @@ class _Run:
     world: int
     step: int  # optimisation steps done
     stop: int  # the step this invocation stops at
+    budget: TimeBudget | None = None  # --minutes: the schedule's total, fitted while the run goes
     weight_spread: float = 0.0  # largest weight difference between DDP processes, measured at the stop
 
 
@@ -266,18 +279,25 @@ def _set_up(
     rank: int,
     world: int,
     device: torch.device,
+    budget: TimeBudget | None = None,
 ) -> _Run:
     """Refuse a bad request, then open the data and build the seeded model, optimizer and loader
-    (resumed from OUT/last.pt with `resume`); nothing is written."""
+    (resumed from OUT/last.pt with `resume`); nothing is written. With a `budget`, the schedule's total
+    is the budget's, refitted as the run goes."""
     o = cfg.optim
-    _refuse(out, o.batch_size, resume, world)
+    _refuse(out, o.batch_size, resume, world, budget is not None and (resume or max_steps is not None))
     dataset = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
-    total = o.epochs * steps_per_epoch(len(dataset), o, world)
+    state = load_checkpoint(out / LAST) if resume else None
+    # a resumed run keeps the schedule it started with (a time budget's fitted one included)
+    total = (state or {}).get("schedule_steps") or o.epochs * steps_per_epoch(len(dataset), o, world)
     sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
     stop = stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, announce=rank == 0)
-    model, optimizer, scheduler = _build(cfg, total, device)
+    stop = budget.total if budget is not None else stop
+    model, optimizer, scheduler = _build(cfg, (lambda: budget.total) if budget else total, device)
     precision = Precision(o.amp, device)
-    step = _restore(out / LAST, model, optimizer, scheduler, precision, cfg.data.obj_id) if resume else 0
+    step = (
+        _restore(state, out / LAST, model, optimizer, scheduler, precision, cfg.data.obj_id) if state else 0
+    )
     if rank == 0:
         tqdm.write(f"precision: {precision.label} (optim.amp {o.amp})")
     return _Run(
@@ -295,11 +315,15 @@ def _set_up(
         world=world,
         step=step,
         stop=stop,
+        budget=budget,
     )
 
 
-def _refuse(out: Path, batch_size: int, resume: bool, world: int) -> None:
-    """A global batch that does not split over the processes, or a new run over an existing one."""
+def _refuse(out: Path, batch_size: int, resume: bool, world: int, budget_mixed: bool = False) -> None:
+    """A global batch that does not split over the processes, a new run over an existing one, or a time
+    budget with --resume or --max-steps (a budget fits a new run's whole schedule)."""
+    if budget_mixed:
+        raise PosenetError("--minutes fits a new run's whole schedule: it takes no --resume or --max-steps")
     if batch_size % world:
         raise PosenetError(f"batch size {batch_size} does not split over {world} processes")
     if not resume and (out / LAST).exists():
@@ -335,7 +359,7 @@ def stop_step(total: int, max_steps: int | None, epochs: int, per_epoch: int, an
 
 
 def _build(
-    cfg: TrainConfig, total: int, device: torch.device
+    cfg: TrainConfig, total: int | Callable[[], int], device: torch.device
 ) -> tuple[PoseNet, torch.optim.Optimizer, LambdaLR]:
     """The network from the run's seed (threads pinned on CPU: reproducible losses), its optimizer and
     the schedule over `total` steps."""
@@ -348,6 +372,7 @@ def _build(
 
 
 def _restore(
+    state: dict[str, Any],
     path: Path,
     model: PoseNet,
     optimizer: torch.optim.Optimizer,
@@ -355,8 +380,8 @@ def _restore(
     precision: Precision,
     obj_id: int,
 ) -> int:
-    """Load a checkpoint of the same network configuration and object into the run; returns its step."""
-    state = load_checkpoint(path)
+    """Load checkpoint `state` (read from `path`) of the same network configuration and object into the
+    run; returns its step."""
     check_model_config(state, model.config_dict(), path)
     trained = config_from_dict(state["config"]).data.obj_id
     if trained != obj_id:
@@ -376,6 +401,7 @@ def _checkpoint(run: _Run) -> dict[str, Any]:
         "optimizer": run.optimizer.state_dict(),
         "scheduler": run.scheduler.state_dict(),
         "step": run.step,
+        "schedule_steps": run.budget.total if run.budget else None,  # a time budget's fitted schedule
         "model_config": run.model.config_dict(),
         "config": run.cfg.to_dict(),
         "world_size": run.world,
@@ -386,7 +412,7 @@ def _checkpoint(run: _Run) -> dict[str, Any]:
     }
 
 
-def _open_run_folder(out: Path, cfg: TrainConfig, step: int, stop: int) -> RunLog:
+def _open_run_folder(out: Path, cfg: TrainConfig, step: int, stop: int | None) -> RunLog:
     """Rank 0: create OUT, write the resolved config.yaml and open the step log from `step`."""
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "config.yaml", cfg.to_yaml())
@@ -408,6 +434,37 @@ def _loop(run: _Run, ckpt: Path | None, log: RunLog | None) -> None:
             save_checkpoint(ckpt, _checkpoint(run))
 
 
+def _follow_budget(run: _Run, log: RunLog | None) -> None:
+    """Refit the schedule to the time budget after a step and stop at its end; under DDP every process
+    takes rank 0's total and stop, so all keep one schedule."""
+    budget, now = run.budget, time.perf_counter()
+    assert budget is not None
+    froze = budget.update(run.step, now)
+    stop = run.step if budget.expired(now) and run.step < budget.total else budget.total
+    if run.world > 1:
+        shared = torch.tensor([budget.total, stop], dtype=torch.int64, device=run.device)
+        dist.broadcast(shared, 0)
+        budget.total, stop = (int(v) for v in shared.tolist())
+    run.stop = stop
+    if log is None:
+        return
+    if budget.fitted:
+        log.bar.total = run.stop
+    if froze:
+        step_s = (now - budget.start) / run.step
+        tqdm.write(
+            f"time budget {budget.seconds / 60:g} min: schedule fitted to {budget.total} steps, cosine "
+            f"from step {run.step} ({step_s:.3f} s per step so far, start-up included)"
+        )
+    elif stop < budget.total:
+        fit = (
+            f"of the fitted {budget.total}"
+            if budget.fitted
+            else f"before the fit (after {PROBE_STEPS} steps)"
+        )
+        tqdm.write(f"time budget spent at step {run.step} {fit}: stopping")
+
+
 def rank_weight_spread(model: torch.nn.Module) -> float:
     """The largest difference of any weight between the DDP processes: 0 while DDP keeps them in sync
     (same initial weights, all-reduced gradients, the same optimiser steps)."""
@@ -423,10 +480,16 @@ def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
     processes and logged with the images the step took over all processes (the global batch)."""
     tic = time.perf_counter()
     for batch in run.loader:
+        scale = run.precision.loss_scale()
         values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm, run.cfg, run.precision)
         lr = run.optimizer.param_groups[0]["lr"]
-        run.scheduler.step()
+        if run.precision.loss_scale() >= scale:
+            # the schedule follows the optimizer's updates: fp16's scaler skips the first ones while it
+            # finds its scale (2^16 -> 2^8 on the amp test config), and the warmup starts at the first update
+            run.scheduler.step()
         run.step += 1
+        if run.budget is not None:
+            _follow_budget(run, log)
         images = torch.tensor([float(len(batch["roi_img"]))], device=values.device)
         if run.world > 1:
             dist.all_reduce(values)

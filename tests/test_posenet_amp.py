@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -63,3 +64,21 @@ def test_auto_is_float32_on_a_cpu_and_the_cpu_preset_is_off() -> None:
     assert resolve_amp("auto", torch.device("cpu")) == "off"
     assert OptimConfig().amp == "auto" and smoke_config().optim.amp == "off"
     assert resolve_amp("bf16", torch.device("cpu")) == "bf16"
+
+
+def test_the_schedule_waits_for_the_first_update_while_fp16_finds_its_loss_scale(
+    runs: dict[str, Path],
+) -> None:
+    """fp16's GradScaler starts at 2^16 and skips the updates whose scaled gradients overflow, halving
+    the scale each time (in these first steps, every one). The warmup must not run on without them: the
+    learning rate stays at the schedule's first value until an update happens. float32 and bf16 skip
+    nothing and follow the schedule step by step."""
+    start = log(runs["off"])[0]["lr"]
+    assert [r["lr"] for r in log(runs["bf16"])] == [r["lr"] for r in log(runs["off"])]
+    assert len({r["lr"] for r in log(runs["off"])}) == STEPS  # the warmup moves at every step
+    state = torch.load(runs["fp16"] / "last.pt", weights_only=True)
+    skipped = round(math.log2(2.0**16 / state["grad_scaler"]["scale"]))
+    assert skipped >= 1
+    lrs = [r["lr"] for r in log(runs["fp16"])]
+    assert lrs[:skipped] == [start] * min(skipped, STEPS)
+    assert lrs[skipped:] == [r["lr"] for r in log(runs["off"])][: STEPS - skipped]

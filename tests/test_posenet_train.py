@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -14,6 +16,7 @@ import yaml
 from click.testing import CliRunner
 from posenet_helpers import posenet_dataset
 
+from posenet.budget import TimeBudget
 from posenet.cli import main
 from posenet.config import OptimConfig, load_config
 from posenet.train import lr_factor
@@ -184,3 +187,47 @@ def test_refusals_are_one_line_and_write_nothing(
     assert losses(run) == {1: losses(run)[1]}
     code, out = posenet("eval", "--data", dataset_dir, "--ckpt", tiny_config)
     assert code == 1 and "not a readable checkpoint" in out
+
+
+def test_a_time_budget_refits_the_schedule_to_the_time_left_and_fixes_it_when_the_cosine_begins() -> None:
+    budget = TimeBudget(seconds=100.0, anneal_point=0.72, start=0.0)
+    clock, step, froze_at = 10.0, 0, None  # 10 s of start-up, then 0.5 s a step, 1 s a step from step 60
+    while froze_at is None:
+        step += 1
+        clock += 0.5 if step <= 60 else 1.0
+        if budget.update(step, clock):
+            froze_at = step
+    assert not budget.update(step + 1, clock + 1.0) and budget.frozen  # fixed from here on
+    # the steps left at the measured rate (0.5 s to step 60, then 1 s, averaged since step 5) fill the time
+    left = budget.total - froze_at
+    assert budget.total == froze_at + int((100.0 - clock) / ((clock - 12.5) / (froze_at - 5)))
+    assert froze_at >= 0.72 * budget.total and froze_at - 1 < 0.72 * budget.total + 1
+    assert 100.0 - clock - left * 1.0 < 0.2 * (100.0 - clock)  # the slow-down is mostly in the estimate
+    assert budget.expired(100.0) and not budget.expired(99.9)
+
+
+def test_minutes_train_a_fitted_schedule_that_ends_at_the_budget(
+    dataset_dir: Path, tiny_config: Path, tmp_path: Path
+) -> None:
+    run = tmp_path / "budget"
+    tic = time.perf_counter()
+    code, out = posenet(
+        "train", "--data", dataset_dir, "--out", run, "--config", tiny_config, "--minutes", 0.5
+    )
+    wall = time.perf_counter() - tic
+    assert code == 0, out
+    fitted = re.search(r"schedule fitted to (\d+) steps, cosine from step (\d+)", out)
+    assert fitted, out
+    total, cosine = int(fitted[1]), int(fitted[2])
+    rows = [json.loads(ln) for ln in (run / "train_log.jsonl").read_text().splitlines()]
+    # the cosine ran to its end, or nearly: a step slower than the fit's estimate stops it at the budget
+    assert 0.9 * total <= rows[-1]["step"] <= total and cosine >= 0.72 * total
+    assert rows[-1]["lr"] < 0.1 * max(r["lr"] for r in rows)
+    assert 0.8 * 30.0 < wall < 30.0 + 8.0  # the budget, give or take the checkpoint written at the end
+    assert torch.load(run / "last.pt", weights_only=False)["schedule_steps"] == total
+    code, out = posenet("train", "--data", dataset_dir, "--out", run, "--resume", "--minutes", 1)
+    assert (
+        code == 1
+        and "--minutes fits a new run's whole schedule" in out
+        and len(out.strip().splitlines()) == 1
+    )
