@@ -61,6 +61,9 @@ class DataConfig:
     # gdrnet-occlusion (applied with color_prob)
     augment: str = "paper"
     workers: int = 4  # DataLoader worker processes per training process
+    # > 0: train on this many images of the train split, the first of one fixed shuffled order, so that a
+    # smaller set lies inside a larger one (accuracy against data: benchmarks/posenet_data_curve.py)
+    train_images: int = 0
 
 
 @dataclass
@@ -246,7 +249,7 @@ def _validate(cfg: TrainConfig) -> None:
         )
     if o.amp not in AMP_MODES:
         raise PosenetError(f"optim.amp must be one of {', '.join(AMP_MODES)}, got {o.amp!r}")
-    if d.workers < 0 or o.threads < 0:
-        raise PosenetError("data.workers and optim.threads must be >= 0")
+    if d.workers < 0 or o.threads < 0 or d.train_images < 0:
+        raise PosenetError("data.workers, data.train_images and optim.threads must be >= 0")
     if not 0.0 <= o.anneal_point <= 1.0:
         raise PosenetError(f"optim.anneal_point must lie in [0, 1], got {o.anneal_point}")

@@ -209,3 +209,19 @@ def test_bad_datasets_are_refused(dataset_dir: Path, tmp_path: Path) -> None:
     missing.write_text("[]")
     with pytest.raises(PosenetError, match="no box for"):
         open_split(dataset_dir, "test", cfg.data, mc, train=False, boxes_file=missing)
+
+
+def test_train_images_takes_nested_subsets_of_the_train_split(dataset_dir: Path) -> None:
+    model = smoke_config().model_config()
+    every = open_split(dataset_dir, "train", DataConfig(), model, train=True)
+    images = {n: {i.im_id for i in open_split(dataset_dir, "train", DataConfig(train_images=n), model,
+                                              train=True).instances} for n in (3, 6)}  # fmt: skip
+    assert len(images[3]) == 3 and len(images[6]) == 6 and images[3] < images[6]
+    assert images[6] <= {i.im_id for i in every.instances}
+    # the same subsets whatever the training seed; evaluation ignores the setting
+    again = open_split(dataset_dir, "train", DataConfig(train_images=3), model, train=True, seed=9)
+    assert {i.im_id for i in again.instances} == images[3]
+    test = open_split(dataset_dir, "test", DataConfig(train_images=3), model, train=False)
+    assert len(test) == len(open_split(dataset_dir, "test", DataConfig(), model, train=False))
+    with pytest.raises(PosenetError, match="data.train_images 999 exceeds the"):
+        open_split(dataset_dir, "train", DataConfig(train_images=999), model, train=True)

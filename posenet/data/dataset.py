@@ -169,6 +169,18 @@ class PoseDataset(Dataset):
         }
 
 
+SUBSET_ORDER_SEED = 0  # data.train_images' fixed order: the same subsets whatever the training seed
+
+
+def first_images(instances: Sequence[Instance], n: int) -> list[Instance]:
+    """The instances of the first `n` images (by id) in a fixed shuffled order of those `instances` hold."""
+    ids = sorted({i.im_id for i in instances})
+    if n > len(ids):
+        raise PosenetError(f"data.train_images {n} exceeds the {len(ids)} training images of the split")
+    keep = set(np.random.default_rng(SUBSET_ORDER_SEED).permutation(ids)[:n].tolist())
+    return [i for i in instances if i.im_id in keep]
+
+
 def open_split(
     root: Path,
     split: str,
@@ -183,7 +195,8 @@ def open_split(
 
     Both modes keep every instance with a visible pixel, restricted to `image_ids` when given; training
     also drops instances visible by no more than `min_visib_fract` (GDR-Net's configs use 0.0, or 0.2 for
-    YCB-V; 0.3 is GDRNPP's), so with the default 0 it trains on every instance evaluation scores.
+    YCB-V; 0.3 is GDRNPP's), so with the default 0 it trains on every instance evaluation scores, and
+    keeps the instances of `train_images` images only when that is set (first_images).
     """
     obj = load_object_model(root, cfg.obj_id, model_cfg.num_regions, cfg.num_pm_points)
     instances = [i for i in scan_split(root, split, cfg.obj_id) if i.px_count_visib > 0]
@@ -192,6 +205,8 @@ def open_split(
         missing = [p for i in instances for p in (i.xyz, i.mask, i.mask_visib) if not p.is_file()]
         if missing:
             raise PosenetError(f"missing xyz maps or masks ({len(missing)} file(s)), e.g. {missing[0]}")
+    if train and cfg.train_images:
+        instances = first_images(instances, cfg.train_images)
     if image_ids is not None:
         instances = [i for i in instances if i.im_id in image_ids]
     boxes = read_boxes(boxes_file, cfg.obj_id) if boxes_file is not None else None
