@@ -84,6 +84,10 @@ def cycles() -> Finding:
     from scgen.render.probe import RESOLUTION, probe
 
     result = probe("blender")
+    if result.error is not None and not result.reached_renderer:  # not Blender's fault: no install advice
+        return Finding(
+            FAIL, "cycles", f"not checked: its test render failed before Blender started: {result.error}"
+        )
     if result.error is not None:
         return Finding(
             FAIL, "cycles", f"cannot render: {result.error}", f"{INSTALL}; until then --backend mitsuba"
@@ -100,6 +104,8 @@ def mitsuba() -> Finding:
     from scgen.render.mitsuba_llvm import LLVM_VARIANT, check_mitsuba
 
     setup = check_mitsuba()
+    if not setup.libllvm.tested:
+        return Finding(WARN, "mitsuba", str(setup.notice))
     if setup.variant == LLVM_VARIANT:
         chosen = f" ({setup.notice})" if setup.notice else ""
         return Finding(OK, "mitsuba", f"{setup.variant} on {setup.libllvm}{chosen}")

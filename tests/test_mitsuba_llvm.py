@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import glob
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -25,6 +26,7 @@ from scgen.render.mitsuba_llvm import (
 from scgen.run.runner import RenderJob, run_render
 
 NOTICE = "scgen: Mitsuba cannot render with"
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def machine_libllvm(major: int) -> str | None:
@@ -32,11 +34,12 @@ def machine_libllvm(major: int) -> str | None:
     return next((p for g in LIBLLVM_GLOBS for p in sorted(glob.glob(g)) if libllvm_major(p) == major), None)
 
 
-def scgen(*args: str, **env: str) -> subprocess.CompletedProcess:
-    """`scgen ARGS` in a fresh process, with this environment less any libLLVM choice, plus `env`."""
+def scgen(*args: str, cwd: Path | None = None, **env: str) -> subprocess.CompletedProcess:
+    """`scgen ARGS` in a fresh process (in `cwd`), with this environment less any libLLVM choice, plus
+    `env`."""
     base = {k: v for k, v in os.environ.items() if k not in (LIBLLVM_ENV, VERDICT_ENV)}
     command = [sys.executable, "-m", "scgen.cli", *args]
-    return subprocess.run(command, env={**base, **env}, capture_output=True, text=True, timeout=600)
+    return subprocess.run(command, env={**base, **env}, capture_output=True, text=True, timeout=600, cwd=cwd)
 
 
 def render_args(out: Path) -> list[str]:
@@ -90,3 +93,18 @@ def test_old_default_libllvm_gives_way_to_a_newer_one_on_the_machine(tmp_path: P
     notices = [line for line in done.stderr.splitlines() if line.startswith(NOTICE)]
     assert len(notices) == 1 and "libLLVM 15" in notices[0] and "found on this machine" in notices[0]
     assert "2/2 on disk" in done.stdout
+
+
+def test_a_check_that_fails_before_mitsuba_names_its_own_cause_without_libllvm_advice(tmp_path: Path):
+    """The package without its bundled model (as a wheel that did not ship it): the libLLVM check's test
+    render fails before Mitsuba starts, and says so in one line naming the missing model, no LLVM advice;
+    the render then stops on the same cause."""
+    shutil.copytree(ROOT / "scgen", tmp_path / "pkg" / "scgen", ignore=shutil.ignore_patterns("__pycache__"))
+    # run outside the checkout, whose scgen `python -m` would put first on the path
+    done = scgen(*render_args(tmp_path / "ds"), cwd=tmp_path, PYTHONPATH=str(tmp_path / "pkg"))
+    lines = done.stderr.splitlines()
+    notices = [line for line in lines if line.startswith("scgen: ")]
+    assert done.returncode == 1 and len(notices) == 1, done.stderr
+    assert notices[0].startswith("scgen: libLLVM not checked: its test render failed before Mitsuba started:")
+    assert "bundled model missing" in notices[0] and "libllvm19" not in done.stderr
+    assert lines[-1].startswith("Error: bundled model missing")

@@ -34,11 +34,13 @@ FAST_PATH = f"apt-get install libllvm19, or set {LIBLLVM_ENV} to a newer libLLVM
 @dataclass(frozen=True)
 class Libllvm:
     """One libLLVM as a probe found it: its file and version (None: unknown), and why Mitsuba cannot
-    render with it (None: it can)."""
+    render with it (None: it can); `tested` False when the probe failed before it reached Mitsuba, so
+    its error is not the libLLVM's."""
 
     path: str | None
     version: str | None
     error: str | None
+    tested: bool = True
 
     def __str__(self) -> str:
         if self.path is None:
@@ -82,6 +84,9 @@ def check_mitsuba() -> MitsubaSetup:
     first = probe_libllvm(forced)
     if first.error is None:
         return MitsubaSetup(LLVM_VARIANT, first)
+    if not first.tested:  # nothing learnt of the libLLVM: keep drjit's own, say what failed instead
+        return MitsubaSetup(LLVM_VARIANT, first, f"libLLVM not checked: its test render failed before "
+                            f"Mitsuba started: {first.error}")  # fmt: skip
     cannot = f"Mitsuba cannot render with {first}: {first.error}"
     newer = newer_libllvms(first)
     search = forced is None and "drjit" not in sys.modules
@@ -106,7 +111,7 @@ def probe_libllvm(path: str | None) -> Libllvm:
     loaded = result.facts.get("libllvm") or path
     major = libllvm_major(loaded) if loaded else None  # drjit reports no version for one it refuses
     version = result.facts.get("version") or (str(major) if major else None)
-    return Libllvm(loaded, version, result.error)
+    return Libllvm(loaded, version, result.error, result.error is None or result.reached_renderer)
 
 
 def newer_libllvms(than: Libllvm) -> list[str]:

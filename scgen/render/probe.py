@@ -29,6 +29,12 @@ class ProbeResult:
     facts: dict[str, Any]
     error: str | None
 
+    @property
+    def reached_renderer(self) -> bool:
+        """Whether the child got as far as the renderer (its scene was ready): if not, its failure says
+        nothing about the renderer (a missing model, a bad config)."""
+        return bool(self.facts.get("scene"))
+
 
 def probe(backend: str, env: dict[str, str] | None = None) -> ProbeResult:
     """Render the probe sample with `backend` (mitsuba: its LLVM variant) in a child process.

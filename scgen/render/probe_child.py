@@ -55,6 +55,7 @@ def main(backend: str) -> None:
     model = load_target()
     cfg = load_config(resolution=RESOLUTION)
     spec = sample_scene(*SAMPLE, cfg, TargetShape.from_mesh(model.mesh, model.diameter))
+    _report(scene=True)  # what fails before this is not the renderer's (a missing model, a bad config)
     renderer = {"mitsuba": _mitsuba, "blender": _blender}[backend](model)
     start = time.perf_counter()
     renderer.render(spec)
