@@ -3,7 +3,8 @@
 A box bus with differently finished faces, two solar wings on thin booms (of unequal length
 and panel count), an off-centre parabolic dish on a tripod, thrusters and a main nozzle, and
 thin struts: weak texture, thin structures and near-symmetry, but no exact symmetry, so every
-pose is unique. Run `python -m scgen.assets.build_spacecraft` to regenerate `assets/spacecraft`.
+pose is unique. Run `python -m scgen.assets.build_spacecraft` (`make assets`) to regenerate
+`scgen/assets/spacecraft`, package data.
 """
 
 from __future__ import annotations

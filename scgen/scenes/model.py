@@ -131,7 +131,9 @@ def load_target(path: str | Path | None = None, keep_scale: bool = False) -> Tar
     if path is None:
         path = ASSET_DIR / PARTS_FILE
         if not path.exists():
-            raise ScgenError(f"bundled model missing at {path}: run `make assets`")
+            raise ScgenError(
+                f"bundled model missing at {path}: reinstall scgen, or in a checkout run `make assets`"
+            )
         return normalise_parts(load_mesh_parts(path), diameter_m=None, name="spacecraft")
     path = Path(path)
     return normalise_parts(load_mesh_parts(path), None if keep_scale else DEFAULT_DIAMETER_M, name=path.stem)
