@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -233,6 +234,7 @@ def train(
     the schedule is fitted to end when that much wall time has passed since this call (posenet.budget)."""
     budget = TimeBudget(60 * minutes, cfg.optim.anneal_point) if minutes is not None else None
     rank, world, device = _init_distributed()
+    created = not out.exists()
     try:
         run = _set_up(data, out, cfg, resume, max_steps, rank, world, device, budget)
         # a time budget's length is known once fitted
@@ -243,6 +245,11 @@ def train(
             if log is not None:
                 log.close()
         return out / LAST
+    except PosenetError:
+        # a sample that cannot be read: a run folder this call made holds nothing to resume, so it goes
+        if rank == 0 and created and not (out / LAST).exists():
+            shutil.rmtree(out, ignore_errors=True)
+        raise
     finally:
         if world > 1:
             dist.destroy_process_group()

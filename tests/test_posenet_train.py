@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import time
@@ -19,6 +20,7 @@ from posenet_helpers import posenet_dataset
 from posenet.budget import TimeBudget
 from posenet.cli import main
 from posenet.config import OptimConfig, load_config
+from posenet.data.layout import scan_split
 from posenet.train import lr_factor
 
 TINY = """\
@@ -231,3 +233,44 @@ def test_minutes_train_a_fitted_schedule_that_ends_at_the_budget(
         and "--minutes fits a new run's whole schedule" in out
         and len(out.strip().splitlines()) == 1
     )
+
+
+def corrupt_copy(dataset: Path, root: Path, split: str, kind: str) -> tuple[Path, Path]:
+    """A copy of `dataset` whose first `split` instance's `kind` file (rgb, mask_visib, xyz) is cut to its
+    first 64 bytes; the copy and that file."""
+    data = root / "ds"
+    shutil.copytree(dataset, data)
+    inst = next(i for i in scan_split(data, split, 1) if i.px_count_visib > 0)
+    path = getattr(inst, kind)
+    path.write_bytes(path.read_bytes()[:64])
+    return data, path
+
+
+@pytest.mark.parametrize("kind, what", [("rgb", "image"), ("mask_visib", "mask"), ("xyz", "xyz map")])
+def test_a_sample_that_cannot_be_read_stops_training_in_one_line_and_leaves_no_run_folder(
+    dataset_dir: Path, tmp_path: Path, kind: str, what: str
+) -> None:
+    data, bad = corrupt_copy(dataset_dir, tmp_path, "train", kind)
+    config = tmp_path / "two_loaders.yaml"
+    config.write_text(TINY.replace("workers: 1", "workers: 2"))  # met in whichever loader process reads it
+    run = tmp_path / "run"
+    code, out = posenet("train", "--data", data, "--out", run, "--config", config, "--max-steps", 4)
+    errors = [line for line in out.splitlines() if line.startswith("Error:")]
+    assert code == 1 and len(errors) == 1 and "Traceback" not in out, out
+    assert errors[0].startswith(f"Error: cannot read {what} {bad}"), errors[0]
+    assert not run.exists()
+
+
+def test_an_unreadable_test_image_stops_evaluation_in_one_line(dataset_dir: Path, tmp_path: Path) -> None:
+    data, bad = corrupt_copy(dataset_dir, tmp_path, "test", "rgb")
+    (tmp_path / "t.yaml").write_text(TINY)
+    run = tmp_path / "run"
+    code, out = posenet(
+        "train", "--data", data, "--out", run, "--config", tmp_path / "t.yaml", "--max-steps", 1
+    )
+    assert code == 0, out
+    code, out = posenet("eval", "--data", data, "--ckpt", run / "last.pt", "--json", tmp_path / "e.json")
+    errors = [line for line in out.splitlines() if line.startswith("Error:")]
+    assert code == 1 and len(errors) == 1 and "Traceback" not in out, out
+    assert errors[0] == f"Error: cannot read image {bad}: truncated or not an image"
+    assert not (tmp_path / "e.json").exists()
