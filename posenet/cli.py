@@ -43,6 +43,7 @@ PATH = click.Path(path_type=Path)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="scgen", prog_name="posenet")  # one distribution holds both packages
 def main() -> None:
     """posenet: GDR-Net / GAP-GDRNet 6D pose networks trained and evaluated on scgen (BOP-layout) datasets."""
 
@@ -82,9 +83,9 @@ def main() -> None:
 )
 @click.option(
     "--amp",
-    type=click.Choice(AMP_MODES),
     default=None,
-    help="Mixed precision, overriding optim.amp (auto: bf16 on a CUDA GPU that has it, else float32).",
+    help=f"Mixed precision, overriding optim.amp: {' | '.join(AMP_MODES)} (auto: bf16 on a CUDA GPU that "
+    "has it, else float32).",  # checked with the config: a bad value is one line, as every other
 )
 @one_line_errors(PosenetError, ScgenError)
 def train(

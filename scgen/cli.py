@@ -12,6 +12,7 @@ from typing import Any
 import click
 
 from scgen.errors import ScgenError
+from scgen.scenes.factors import FACTOR_GROUPS
 
 
 def one_line_errors(*errors: type[Exception]) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
@@ -224,7 +225,7 @@ def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
     click.echo(f"OK {dataset}: {n} samples pass every check")
 
 
-@main.command()
+@main.command(help=f"Group counts of the robustness factors: {', '.join(FACTOR_GROUPS)}.")
 @click.argument("dataset", type=click.Path(path_type=Path))
 @click.option("--split", default=None, help="Only this split (train | val | test); default: every split.")
 @click.option(
@@ -262,7 +263,7 @@ def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
 )
 @one_line_errors(ScgenError)
 def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_groups, seed, groups_out) -> None:
-    """Group counts of the robustness factors: illumination, shadow, occlusion, background, distance."""
+    """Group counts of the robustness factors (the help lists scgen.scenes.factors.FACTOR_GROUPS)."""
     import json
 
     from scgen.dataset.atomic import atomic_write_text

@@ -189,6 +189,10 @@ def test_refusals_are_one_line_and_write_nothing(
     assert losses(run) == {1: losses(run)[1]}
     code, out = posenet("eval", "--data", dataset_dir, "--ckpt", tiny_config)
     assert code == 1 and "not a readable checkpoint" in out
+    code, out = posenet("train", "--data", dataset_dir, "--out", tmp_path / "r2", "--amp", "fp8")
+    assert code == 1 and out.strip() == "Error: optim.amp must be one of auto, off, bf16, fp16, got 'fp8'"
+    code, out = posenet("--version")
+    assert code == 0 and out.startswith("posenet, version ")
 
 
 def test_a_time_budget_refits_the_schedule_to_the_time_left_and_fixes_it_when_the_cosine_begins() -> None:
