@@ -42,13 +42,12 @@ import dataclasses
 import json
 import math
 import shutil
-import sys
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
-from posenet_learning import BACKEND, SEED, WORKERS, pct, train_and_follow
+from posenet_learning import BACKEND, SEED, WORKERS, pct, run_script, train_and_follow
 
 from posenet.config import load_config
 from posenet.data import open_split
@@ -59,7 +58,6 @@ from posenet.evaluate import evaluate
 from posenet.geometry import roi_translation
 from posenet.train import steps_per_epoch, train
 from scgen.dataset.atomic import atomic_write_text
-from scgen.errors import ScgenError
 from scgen.run.runner import RenderJob, run_render
 from scgen.scenes.attitude import nominal_rotation, ray_rotation
 
@@ -241,10 +239,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def main() -> None:
-    try:
-        run(parse_args())
-    except (PosenetError, ScgenError) as exc:
-        sys.exit(f"error: {exc}")
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -20,21 +20,18 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from posenet_learning import BACKEND, RESOLUTION, SEED, WORKERS
+from posenet_learning import BACKEND, RESOLUTION, SEED, WORKERS, run_script
 
 from posenet.config import load_config
 from posenet.data.dataset import first_images
 from posenet.data.layout import scan_split
-from posenet.errors import PosenetError
 from posenet.evaluate import evaluate
 from posenet.train import LAST, steps_per_epoch, train
 from scgen.dataset.atomic import atomic_write_text
-from scgen.errors import ScgenError
 from scgen.run.runner import RenderJob, run_render
 
 N, SIZES, TEST_N, STEPS = 30000, (700, 2100, 7000, 21000), 1000, 10440
@@ -134,10 +131,7 @@ def run(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 
 def main() -> None:
-    try:
-        run(parse_args())
-    except (PosenetError, ScgenError) as exc:
-        sys.exit(f"error: {exc}")
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

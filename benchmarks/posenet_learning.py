@@ -41,6 +41,7 @@ import shutil
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -412,12 +413,16 @@ def run(args: argparse.Namespace) -> None:
     print(f"wrote {args.out / 'learning.json'}")
 
 
-def main() -> None:
-    args = parse_args()
+def run_script(run: Callable[[argparse.Namespace], object], args: argparse.Namespace) -> None:
+    """Run a benchmark: bad input (PosenetError, ScgenError) ends it with one line and exit status 1."""
     try:
         run(args)
     except (PosenetError, ScgenError) as exc:
         sys.exit(f"error: {exc}")
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":
