@@ -24,13 +24,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from posenet_learning import BACKEND, RESOLUTION, SEED, WORKERS, run_script
+from posenet_learning import BACKEND, RESOLUTION, SEED, WORKERS, run_script, schedule
 
 from posenet.config import load_config
 from posenet.data.dataset import first_images
 from posenet.data.layout import scan_split
 from posenet.evaluate import evaluate
-from posenet.train import LAST, steps_per_epoch, train
+from posenet.train import LAST, train
 from scgen.dataset.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 
@@ -69,8 +69,8 @@ def train_point(data: Path, out: Path, size: int, steps: int) -> Path:
     resumes a run that stopped part-way."""
     cfg = load_config("smoke")
     cfg.data.train_images = size
-    n_train = len(first_images([i for i in scan_split(data, "train", 1) if i.px_count_visib > 0], size))
-    cfg.optim.epochs = max(1, math.ceil(steps / steps_per_epoch(n_train, cfg.optim)))
+    n_train, per_epoch, _ = schedule(data, cfg)
+    cfg.optim.epochs = max(1, math.ceil(steps / per_epoch))
     run = out / f"run-{size}"
     print(f"\n{size} training images ({n_train} instances), {steps} steps ({cfg.optim.epochs} epochs)")
     return train(data, run, cfg, resume=(run / LAST).exists(), max_steps=steps)

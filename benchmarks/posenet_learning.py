@@ -181,14 +181,26 @@ def schedule(data: Path, cfg: TrainConfig) -> tuple[int, int, int]:
     return len(ds), per_epoch, o.epochs * per_epoch
 
 
-def floor_lines(final: dict[str, dict[str, Any]]) -> list[str]:
-    """One line per floor of FLOORS: the figure, the bound and whether it is met."""
-    lines = []
-    for split, key, bound, kind in FLOORS:
+Floor = tuple[str, str, float, str]  # (split, figure, bound, "max" | "min")
+
+
+def floor_rows(final: dict[str, dict[str, Any]], floors: tuple[Floor, ...] = FLOORS) -> list[dict[str, Any]]:
+    """Each floor with the split's figure in `final` and whether it is met."""
+    rows = []
+    for split, key, bound, kind in floors:
         value = final[split][key]
-        met = value <= bound if kind == "max" else value >= bound
-        lines.append(f"{split} {key} {value:.3f} ({'<=' if kind == 'max' else '>='} {bound}): "
-                     f"{'met' if met else 'NOT met'}")  # fmt: skip
+        met = bool(value <= bound if kind == "max" else value >= bound)
+        rows.append({"split": split, "figure": key, "bound": bound, "kind": kind, "value": value, "met": met})
+    return rows
+
+
+def floor_lines(final: dict[str, dict[str, Any]], floors: tuple[Floor, ...] = FLOORS) -> list[str]:
+    """One line per floor: the figure, the bound and whether it is met."""
+    lines = []
+    for r in floor_rows(final, floors):
+        sign = "<=" if r["kind"] == "max" else ">="
+        lines.append(f"{r['split']} {r['figure']} {r['value']:.3f} ({sign} {r['bound']}): "
+                     f"{'met' if r['met'] else 'NOT met'}")  # fmt: skip
     return lines
 
 

@@ -6,7 +6,7 @@ import re
 
 # how torch's DataLoader re-raises an exception met in a loader process: the type, then the worker's
 # traceback as text, whose last line is the original "module.Type: message"
-_LOADER_WRAPPED = re.compile(r"^Caught PosenetError in DataLoader worker process \d+\.\n", re.S)
+_LOADER_WRAPPED = re.compile(r"Caught PosenetError in DataLoader worker process \d+\.\n")
 
 
 class PosenetError(Exception):

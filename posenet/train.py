@@ -232,6 +232,8 @@ def train(
 ) -> Path:
     """Train on `data`'s train split into `out`; returns the path of the last checkpoint. With `minutes`,
     the schedule is fitted to end when that much wall time has passed since this call (posenet.budget)."""
+    if minutes is not None and (resume or max_steps is not None):
+        raise PosenetError("--minutes fits a new run's whole schedule: it takes no --resume or --max-steps")
     budget = TimeBudget(60 * minutes, cfg.optim.anneal_point) if minutes is not None else None
     rank, world, device = _init_distributed()
     created = not out.exists()
@@ -292,14 +294,15 @@ def _set_up(
     (resumed from OUT/last.pt with `resume`); nothing is written. With a `budget`, the schedule's total
     is the budget's, refitted as the run goes."""
     o = cfg.optim
-    _refuse(out, o.batch_size, resume, world, budget is not None and (resume or max_steps is not None))
+    _refuse(out, o.batch_size, resume, world)
     dataset = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
     state = load_checkpoint(out / LAST) if resume else None
     # a resumed run keeps the schedule it started with (a time budget's fitted one included)
     total = (state or {}).get("schedule_steps") or o.epochs * steps_per_epoch(len(dataset), o, world)
     sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
-    stop = stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, announce=rank == 0)
-    stop = budget.total if budget is not None else stop
+    stop = (
+        budget.total if budget else stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, rank == 0)
+    )
     model, optimizer, scheduler = _build(cfg, (lambda: budget.total) if budget else total, device)
     precision = Precision(o.amp, device)
     step = (
@@ -326,11 +329,8 @@ def _set_up(
     )
 
 
-def _refuse(out: Path, batch_size: int, resume: bool, world: int, budget_mixed: bool = False) -> None:
-    """A global batch that does not split over the processes, a new run over an existing one, or a time
-    budget with --resume or --max-steps (a budget fits a new run's whole schedule)."""
-    if budget_mixed:
-        raise PosenetError("--minutes fits a new run's whole schedule: it takes no --resume or --max-steps")
+def _refuse(out: Path, batch_size: int, resume: bool, world: int) -> None:
+    """A global batch that does not split over the processes, or a new run over an existing one."""
     if batch_size % world:
         raise PosenetError(f"batch size {batch_size} does not split over {world} processes")
     if not resume and (out / LAST).exists():
