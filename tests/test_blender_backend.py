@@ -45,7 +45,7 @@ def test_unknown_device_and_quality_are_clear_errors(model):
 
 def test_missing_bpy_and_unsupported_python_are_clear_errors(model, monkeypatch):
     monkeypatch.setitem(sys.modules, "bpy", None)  # makes `import bpy` fail
-    with pytest.raises(ScgenError, match="pip install bpy"):
+    with pytest.raises(ScgenError, match=r"pip install .scgen\[render\]"):
         BlenderBackend(model)
     monkeypatch.setattr(sys, "version_info", (3, 12, 4, "final", 0))
     with pytest.raises(ScgenError, match="Python 3.11"):

@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RENDERERS = ("bpy", "mitsuba", "drjit", "scgen.render")
 # what a renderer hands on (Buffers): the one scgen.render module annotation and the writer import
 RENDER_OUTPUT = {"scgen.render", "scgen.render.buffers"}
-CLI_MODULES = {"scgen/cli.py", "posenet/cli.py"}
+CLI_MODULES = {"scgen/cli.py", "posenet/cli.py", "posenet/console.py"}
 CLI_IMPORTS = {"click", "scgen.cli", "posenet.cli"}
 
 
@@ -37,14 +37,25 @@ def loaded_modules(*modules: str) -> set[str]:
             "scgen.dataset.bop",
             "scgen.dataset.bop_dataset",
         ),
-        ("posenet.cli",),
     ],
-    ids=["scenes-annotate", "posenet"],
+    ids=["scenes-annotate"],
 )
 def test_no_renderer_is_imported(modules: tuple[str, ...]) -> None:
-    loaded = loaded_modules(*modules)
-    renderers = {m for m in loaded if m.split(".")[0] in RENDERERS or m.startswith(RENDERERS)}
-    assert renderers - RENDER_OUTPUT == set()
+    assert renderer_modules(loaded_modules(*modules)) - RENDER_OUTPUT == set()
+
+
+def renderer_modules(names: set[str]) -> set[str]:
+    return {m for m in names if m.split(".")[0] in RENDERERS or m.startswith(RENDERERS)}
+
+
+def test_posenet_never_imports_a_renderer() -> None:
+    """A training node has no bpy and no Mitsuba (`pip install 'scgen[train]'`): no posenet module
+    imports one, or scgen's render layer, at any depth (function-level imports too), and importing every
+    posenet module loads none."""
+    paths = sorted(ROOT.glob("posenet/**/*.py"))
+    static = {f"{p.relative_to(ROOT)}: {n}" for p in paths for n in renderer_modules(imported_names(p))}
+    assert static == set()
+    assert renderer_modules(loaded_modules(*(module_name(ROOT, p) for p in paths))) == set()
 
 
 def imported_names(path: Path) -> set[str]:

@@ -25,27 +25,33 @@ class Backend(Protocol):
     def close(self) -> None: ...
 
 
+MITSUBA_MISSING = {  # Blender's labels are Mitsuba ray casts too
+    "mitsuba": "the mitsuba backend needs Mitsuba 3: pip install 'scgen[mitsuba]'",
+    "blender": "the blender backend casts its labels through Mitsuba 3: pip install 'scgen[render]'",
+}
+
+
 def check_backend(name: str, device: str = "auto") -> None:
     """Fail fast, before anything is written, when a backend cannot run here; builds no renderer here.
 
     Only `--device gpu` imports bpy (to ask Cycles for a GPU); otherwise the modules are only located.
     Mitsuba's variant and libLLVM are settled here, by a child process, before drjit is imported.
     """
+    if name not in BACKENDS:
+        raise ScgenError(f"unknown backend '{name}' (choose from {', '.join(BACKENDS)})")
+    if importlib.util.find_spec("mitsuba") is None:
+        raise ScgenError(MITSUBA_MISSING[name])
     if name == "mitsuba":
-        if importlib.util.find_spec("mitsuba") is None:
-            raise ScgenError("the mitsuba backend needs the mitsuba package: pip install mitsuba")
         from scgen.render.mitsuba_llvm import mitsuba_setup
 
         mitsuba_setup()
-    elif name == "blender":
+    else:
         from scgen.render.blender_env import check_bpy, check_device, import_bpy, select_device
 
         check_bpy()
         check_device(device)
         if device == "gpu":
             select_device(import_bpy(), device)
-    else:
-        raise ScgenError(f"unknown backend '{name}' (choose from {', '.join(BACKENDS)})")
 
 
 def create_backend(

@@ -46,7 +46,7 @@ def import_bpy() -> ModuleType:
 
 
 def _missing(reason: str) -> str:
-    return f"the blender backend needs bpy ({reason}): pip install bpy==5.0.1, or use --backend mitsuba"
+    return f"the blender backend needs bpy ({reason}): pip install 'scgen[render]', or use --backend mitsuba"
 
 
 def check_device(device: str) -> None:
