@@ -73,7 +73,7 @@ def scene_options(command: Callable[..., Any]) -> Callable[..., Any]:
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="scgen")
+@click.version_option(package_name="scgen", prog_name="scgen")
 def main() -> None:
     """scgen: dense-labelled synthetic 6D-pose datasets of one spacecraft (BOP layout + xyz maps)."""
 
@@ -324,19 +324,21 @@ def merge(out: Path, shards: tuple[Path, ...]) -> None:
     metavar="copy|hardlink|symlink",
     help="speedplus only: how the images get into OUT (default copy).",
 )
+@click.option("--quiet", is_flag=True, help="No progress bar.")
 @one_line_errors(ScgenError)
-def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | None) -> None:
+def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | None, quiet: bool) -> None:
     """Export a dataset to SPEED+ or COCO, keeping its train/val/test split (docs/dataset.md).
 
     \b
     speedplus: OUT/camera.json, OUT/synthetic/images/, OUT/synthetic/{train,validation,test}.json
     coco:      OUT/instances_{train,val,test}.json (file_name relative to DATASET)
 
-    Nothing is written when DATASET, --format or OUT is refused; OUT appears only once complete.
+    Every image is decoded first: nothing is written when DATASET (one of its files unreadable), --format
+    or OUT is refused; OUT appears only once complete.
     """
     from scgen.dataset.export import export_dataset
 
-    counts = export_dataset(dataset, fmt, out, overwrite, images)
+    counts = export_dataset(dataset, fmt, out, overwrite, images, progress=not quiet)
     click.echo(f"{out}: {fmt} export of {dataset}, " + ", ".join(f"{k} {v}" for k, v in counts.items()))
 
 

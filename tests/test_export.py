@@ -29,7 +29,7 @@ LABEL_FILES = {"train": "train.json", "val": "validation.json", "test": "test.js
 
 
 def export(*args: str) -> tuple[int, list[str]]:
-    result = CliRunner().invoke(main, ["export", *args])
+    result = CliRunner().invoke(main, ["export", *args, "--quiet"])
     return result.exit_code, [ln for ln in result.output.strip().splitlines() if ln]
 
 
@@ -187,3 +187,21 @@ def test_a_failure_while_writing_leaves_out_untouched(small_dataset: Path, tmp_p
     assert code != 0 and len(lines) == 1 and f"sample {sid}" in lines[0], lines
     assert [p.name for p in out.iterdir()] == ["old.json"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds", "out"]
+
+
+@pytest.mark.parametrize("fmt", ["speedplus", "coco"])
+def test_a_dataset_with_an_image_that_cannot_be_read_is_refused(
+    small_dataset: Path, tmp_path: Path, fmt: str
+) -> None:
+    """Every image is decoded before anything is written: a truncated one is named in one line."""
+    root = tmp_path / "ds"
+    shutil.copytree(small_dataset, root)
+    layout = Layout(root)
+    record = next(layout.record_paths())
+    rec = bop.read_json(record)
+    image = layout.rgb(rec["split"], rec["sample_id"], bop.read_json(layout.manifest_path)["rgb_format"])
+    image.write_bytes(image.read_bytes()[:100])
+    code, lines = export(str(root), "--format", fmt, "--out", str(tmp_path / "out"))
+    why = f"sample {rec['sample_id']}: cannot read {image}: truncated or not an image"
+    assert code == 1 and lines == [f"Error: {why}"], lines
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]

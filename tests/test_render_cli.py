@@ -6,6 +6,8 @@ import csv
 import filecmp
 import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -167,3 +169,28 @@ def test_saved_depth_round_trips_without_wrapping(small_dataset: Path):
         fits = depth * 1000.0 / scale <= 65535
         assert np.abs(stored * scale / 1000.0 - depth)[fits].max() <= 0.5 * scale / 1000.0 + 1e-6
         assert (stored[~fits] == 0).all() and fits[depth <= spec.distance_m + model.diameter].all()
+
+
+def test_validate_names_each_unreadable_file_once_with_its_cause(small_dataset: Path, tmp_path: Path):
+    """A PNG cut in half (libpng's own "Read Error" line stays off the terminal), an empty depth PNG and a
+    truncated scene_gt.json: one FAIL line each, naming the file and what is wrong with it."""
+    bad = tmp_path / "bad"
+    shutil.copytree(small_dataset, bad)
+    layout = Layout(bad)
+    manifest = read_json(layout.manifest_path)
+    ids = sorted(int(p.stem) for p in layout.record_paths())
+    rgb = layout.rgb(_split(layout, ids[0]), ids[0], manifest["rgb_format"])
+    rgb.write_bytes(rgb.read_bytes()[: rgb.stat().st_size // 2])
+    depth = layout.depth(_split(layout, ids[1]), ids[1])
+    depth.write_bytes(b"")
+    gt_path = layout.chunk_dir(_split(layout, ids[2]), ids[2]) / "scene_gt.json"
+    gt_path.write_text(gt_path.read_text()[:200])
+    command = [sys.executable, "-m", "scgen.cli", "validate", str(bad), "--quiet", "--workers", "1"]
+    done = subprocess.run(command, capture_output=True, text=True)
+    fails = [ln for ln in done.stdout.splitlines() if ln.startswith("FAIL")]
+    assert done.returncode == 1 and "libpng" not in done.stderr + done.stdout, done.stderr
+    assert f"FAIL sample {ids[0]}: cannot read {rgb}: truncated or not an image" in fails
+    assert f"FAIL sample {ids[1]}: cannot read {depth}: empty file" in fails
+    gt_fails = [ln for ln in fails if str(gt_path) in ln]
+    assert len(gt_fails) == 1 and "Expecting" in gt_fails[0], fails  # json's own words, once
+    assert len(fails) == 3, fails

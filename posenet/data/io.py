@@ -9,17 +9,17 @@ import numpy as np
 
 from posenet.errors import PosenetError
 from scgen.dataset.exr import read_xyz_exr
+from scgen.dataset.image_file import read_image, why_unreadable
 
 
 def unreadable(kind: str, path: Path) -> PosenetError:
     """The error for an image file OpenCV could not decode: missing, or there and not decodable."""
-    why = "truncated or not an image" if path.is_file() else "no such file"
-    return PosenetError(f"cannot read {kind} {path}: {why}")
+    return PosenetError(f"cannot read {kind} {path}: {why_unreadable(path)}")
 
 
 def read_bgr(path: Path) -> np.ndarray:
     """H x W x 3 uint8 in OpenCV's BGR order (callers flip to RGB after cropping: less to convert)."""
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    img = read_image(path, cv2.IMREAD_COLOR)
     if img is None:
         raise unreadable("image", path)
     return img
@@ -27,7 +27,7 @@ def read_bgr(path: Path) -> np.ndarray:
 
 def read_mask(path: Path) -> np.ndarray:
     """H x W uint8 in {0, 1}."""
-    m = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    m = read_image(path, cv2.IMREAD_GRAYSCALE)
     if m is None:
         raise unreadable("mask", path)
     return (m > 127).astype(np.uint8)

@@ -12,6 +12,9 @@ import numpy as np
 
 from posenet.errors import PosenetError
 from scgen.dataset import bop
+from scgen.dataset.layout import NOT_A_FOLDER, not_a_dataset
+
+MAKE_ONE = "(make one with `scgen render`, or bring a BOP dataset with xyz maps: docs/dataset.md)"
 
 
 @dataclass(frozen=True)
@@ -48,8 +51,10 @@ class Instance:
 def image_size(root: Path) -> tuple[int, int]:
     """(width, height) from camera.json; also the check that `root` is a dataset at all."""
     cam_path = root / bop.CAMERA_FILE
-    if not root.is_dir() or not cam_path.is_file():
-        raise PosenetError(f"{root} is not a dataset folder (no {bop.CAMERA_FILE})")
+    if not root.is_dir():
+        raise PosenetError(not_a_dataset(root, NOT_A_FOLDER))
+    if not cam_path.is_file():
+        raise PosenetError(not_a_dataset(root, f"has no {bop.CAMERA_FILE} {MAKE_ONE}"))
     cam = bop.read_json(cam_path)
     return int(cam["width"]), int(cam["height"])
 

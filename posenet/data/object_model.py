@@ -13,8 +13,10 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from posenet.data.layout import MAKE_ONE
 from posenet.errors import PosenetError
 from scgen.dataset import bop
+from scgen.dataset.layout import NOT_A_FOLDER, not_a_dataset
 
 SURFACE_POINTS_SEED = 0  # fixed: the PM loss and ADD / ADD-S see the same points in every run
 
@@ -65,7 +67,8 @@ def load_object_model(root: Path, obj_id: int, num_regions: int, num_pm: int) ->
     info_path, ply_path = models / bop.MODELS_INFO_FILE, models / bop.model_file(obj_id)
     for path in (info_path, ply_path):
         if not path.is_file():
-            raise PosenetError(f"{root} is not a dataset: {path.relative_to(root)} is missing")
+            why = NOT_A_FOLDER if not root.is_dir() else f"has no {path.relative_to(root)} {MAKE_ONE}"
+            raise PosenetError(not_a_dataset(root, why))
     try:
         info = bop.read_models_info(root)[str(obj_id)]
         extent = bop.model_size_m(info)

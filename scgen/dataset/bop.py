@@ -12,10 +12,10 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import trimesh
 
+from scgen.dataset.image_file import read_image
 from scgen.errors import ScgenError
 from scgen.scenes.lens import DIST_KEYS, is_pinhole
 from scgen.scenes.spec import CameraSpec
@@ -58,7 +58,7 @@ def mask_path(scene: Path, im_id: int, inst: int, visib: bool = False) -> Path:
 
 def read_mask(path: Path) -> np.ndarray | None:
     """A mask PNG as a bool array (pixels over half of 8-bit white), or None when missing or unreadable."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    img = read_image(Path(path))
     return None if img is None else img > 127
 
 

@@ -99,13 +99,21 @@ def dumps(obj: Any) -> str:
     return json.dumps(obj, indent=1, sort_keys=True) + "\n"
 
 
+NOT_A_FOLDER = "does not exist or is not a directory"
+
+
+def not_a_dataset(root: str | Path, why: str) -> str:
+    """The one wording of both CLIs (scgen, posenet) for a dataset argument that is not one."""
+    return f"not a dataset folder: {root} {why}"
+
+
 def open_dataset(root: str | Path) -> tuple[Layout, dict[str, Any]]:
     """The layout and manifest of an existing dataset; a clear error when `root` is not one."""
     layout = Layout(root)
     if not layout.root.is_dir():
-        raise ScgenError(f"not a dataset folder: {root} does not exist or is not a directory")
+        raise ScgenError(not_a_dataset(root, NOT_A_FOLDER))
     if not layout.manifest_path.is_file():
-        raise ScgenError(f"not a dataset folder: {root} has no {MANIFEST} (make one with `scgen render`)")
+        raise ScgenError(not_a_dataset(root, f"has no {MANIFEST} (make one with `scgen render`)"))
     manifest = read_json(layout.manifest_path)
     if manifest.get("format") != FORMAT:
         raise ScgenError(

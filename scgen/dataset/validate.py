@@ -8,7 +8,6 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import trimesh
 from tqdm import tqdm
@@ -18,6 +17,7 @@ from scgen.dataset import bop
 from scgen.dataset.bop import read_json
 from scgen.dataset.bop_dataset import BopDataset, BopImage, is_bop_dataset, open_bop_dataset
 from scgen.dataset.exr import read_xyz_exr
+from scgen.dataset.image_file import read_image, why_unreadable
 from scgen.dataset.layout import OBJ_ID, Layout, open_dataset, read_metadata
 from scgen.dataset.models import EVAL_MAX_EDGE_FRAC
 from scgen.dataset.writer import TargetImage, dataset_target, target_images, target_lists
@@ -76,8 +76,8 @@ def check_scene(
     layout, manifest = open_dataset(root)
     target = dataset_target(layout)
     lo, size = bop.model_box_m(bop.read_models_info(layout.root)[str(OBJ_ID)])
-    scene_files = read_scene_files(records[0].parent.parent)
-    seen, problems, images = [], [], []
+    scene_files, problems = read_scene_files(records[0].parent.parent)
+    seen, images = [], []
     for path in records:
         rec = read_json(path)
         sid, split = rec["sample_id"], rec["split"]
@@ -134,27 +134,24 @@ def check_test_targets(layout: Layout, images: list[TargetImage]) -> list[str]:
     return out
 
 
-def read_scene_files(scene: Path) -> dict[str, Any]:
-    """{name: content} of a scene folder's BOP JSON files (None where missing or unreadable)."""
+def read_scene_files(scene: Path) -> tuple[dict[str, Any], list[str]]:
+    """({name: content} of a scene folder's readable BOP JSON files, one problem per unreadable file)."""
     out: dict[str, Any] = {}
+    problems = []
     for name in bop.SCENE_FILES:
-        path = bop.scene_file(scene, name)
         try:
-            out[name] = read_json(path)
-        except ScgenError:
-            out[name] = None
-    return out
+            out[name] = read_json(bop.scene_file(scene, name))
+        except ScgenError as exc:
+            problems.append(str(exc))
+    return out, problems
 
 
 def check_bop_entries(scene_files: dict[str, Any], rec: dict[str, Any]) -> list[str]:
-    """The BOP files (what posenet and bop_toolkit read) must hold exactly the sample's record."""
-    out = []
-    for name, content in scene_files.items():
-        if content is None:
-            out.append(f"{name}.json missing or unreadable")
-        elif content.get(str(rec["sample_id"])) != rec[name]:
-            out.append(f"{name}.json entry missing or different from the sample's record")
-    return out
+    """The BOP files (what posenet and bop_toolkit read) must hold exactly the sample's record; an
+    unreadable file is reported once for its scene (read_scene_files), not per sample."""
+    sid = str(rec["sample_id"])
+    return [f"{name}.json entry missing or different from the sample's record"
+            for name, content in scene_files.items() if content.get(sid) != rec[name]]  # fmt: skip
 
 
 def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], lo: np.ndarray,
@@ -164,11 +161,11 @@ def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], 
     sid, split = rec["sample_id"], rec["split"]
     out: list[str] = []
     rgb_path = layout.rgb(split, sid, manifest["rgb_format"])
-    rgb = cv2.imread(str(rgb_path), cv2.IMREAD_COLOR)
-    mask = bop.read_mask(layout.mask(split, sid))
-    visib = bop.read_mask(layout.mask(split, sid, visib=True))
-    if rgb is None or mask is None or visib is None:
-        return [f"unreadable or missing image/mask ({rgb_path.parent.parent})"]
+    paths = rgb_path, layout.mask(split, sid), layout.mask(split, sid, visib=True)
+    rgb, mask, visib = read_image(paths[0]), bop.read_mask(paths[1]), bop.read_mask(paths[2])
+    decoded = zip(paths, (rgb, mask, visib), strict=True)
+    if unreadable := [f"cannot read {p}: {why_unreadable(p)}" for p, a in decoded if a is None]:
+        return unreadable
     if mask.shape != rgb.shape[:2] or visib.shape != rgb.shape[:2]:
         out.append("mask size differs from the RGB size")
         return out
@@ -177,9 +174,12 @@ def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], 
         out.append(f"mask_visib has {int((visib & ~mask).sum())} pixels outside mask")
     depth = None
     if manifest["save_depth"]:
-        depth = cv2.imread(str(layout.depth(split, sid)), cv2.IMREAD_UNCHANGED)
-        if depth is None or depth.dtype != np.uint16 or depth.shape != mask.shape:
-            return out + ["depth image missing, unreadable, or not uint16 of the image size"]
+        depth_path = layout.depth(split, sid)
+        depth = read_image(depth_path)
+        if depth is None:
+            return out + [f"cannot read {depth_path}: {why_unreadable(depth_path)}"]
+        if depth.dtype != np.uint16 or depth.shape != mask.shape:
+            return out + [f"{depth_path} is not uint16 of the image size"]
     vertices, faces, depth_scale = target
     if rec["scene_camera"]["depth_scale"] != depth_scale:
         out.append(f"depth_scale {rec['scene_camera']['depth_scale']} != camera.json's {depth_scale}")

@@ -20,10 +20,11 @@ FORMATS = ("speedplus", "coco")
 
 
 def export_dataset(root: str | Path, fmt: str, out: str | Path, overwrite: bool = False,
-                   images: str | None = None) -> dict[str, int]:  # fmt: skip
+                   images: str | None = None, progress: bool = False) -> dict[str, int]:  # fmt: skip
     """Export the dataset at `root` as `fmt` into `out`; returns the number of images per file written.
 
-    `images` (speedplus only): copy (default), hardlink or symlink the rendered images.
+    `images` (speedplus only): copy (default), hardlink or symlink the rendered images. Every image is
+    decoded before anything is written: a dataset with one that cannot be read is refused.
     """
     if fmt not in FORMATS:
         raise ScgenError(f"unknown export format '{fmt}' (choose from {', '.join(FORMATS)})")
@@ -31,9 +32,9 @@ def export_dataset(root: str | Path, fmt: str, out: str | Path, overwrite: bool 
         raise ScgenError(f"--images applies to --format speedplus only ({fmt} writes no images)")
     if images is not None and images not in IMAGE_MODES:
         raise ScgenError(f"unknown --images '{images}' (choose from {', '.join(IMAGE_MODES)})")
-    source = read_source(root)
     out = Path(out)
-    check_out(source.root, out, overwrite)
+    check_out(Path(root), out, overwrite)  # before the images are read: the quick refusals first
+    source = read_source(root, progress)
     with staged(out) as tmp:
         if fmt == "coco":
             return coco.write(source, tmp)

@@ -20,6 +20,7 @@ from pycocotools import mask as mask_utils
 import scgen
 from scgen.dataset import bop
 from scgen.dataset.export.source import Sample, Source
+from scgen.dataset.image_file import why_unreadable
 from scgen.dataset.layout import OBJ_ID, dumps
 from scgen.dataset.splits import SPLITS
 from scgen.errors import ScgenError
@@ -62,7 +63,8 @@ def annotation(sample: Sample) -> dict[str, Any]:
     """The target's annotation; its id is the sample id + 1, as COCOeval takes id 0 for 'no match'."""
     visib = bop.read_mask(sample.mask_visib)
     if visib is None:
-        raise ScgenError(f"sample {sample.sample_id}: mask missing or unreadable: {sample.mask_visib}")
+        path = sample.mask_visib
+        raise ScgenError(f"sample {sample.sample_id}: cannot read {path}: {why_unreadable(path)}")
     x, y, w, h = bop.box_pixels(sample.gt_info["bbox_visib"])  # COCO's w, h count pixels: BOP's + 1
     return {"id": sample.sample_id + 1, "image_id": sample.sample_id, "category_id": OBJ_ID,
             "bbox": [x, y, w, h], "area": int(sample.gt_info["px_count_visib"]), "segmentation": rle(visib),

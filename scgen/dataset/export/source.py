@@ -11,9 +11,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from scgen.dataset import bop
 from scgen.dataset.bop_dataset import BopImage, open_bop_dataset
+from scgen.dataset.image_file import read_image, why_unreadable
 from scgen.dataset.layout import OBJ_ID, TARGET_INSTANCE, Layout, open_dataset, read_metadata
 from scgen.errors import ScgenError
 
@@ -49,8 +51,9 @@ class Source:
         return path.relative_to(self.root).as_posix()
 
 
-def read_source(root: str | Path) -> Source:
-    """Every sample of a finished scgen dataset; a one-line ScgenError when `root` is not one."""
+def read_source(root: str | Path, progress: bool = False) -> Source:
+    """Every sample of a finished scgen dataset, each image decoded once; a one-line ScgenError when
+    `root` is not one, or names a file it cannot read."""
     layout, manifest = open_dataset(root)
     rows = read_metadata(root)
     data = open_bop_dataset(layout.root)
@@ -62,7 +65,7 @@ def read_source(root: str | Path) -> Source:
                          "(an unfinished render: re-run it to finish)")  # fmt: skip
     scenes: dict[Path, tuple[dict[str, Any], dict[str, Any]]] = {}
     samples = []
-    for row in rows:
+    for row in tqdm(rows, desc="export: reading", unit="img", disable=not progress):
         image = images[int(row["sample_id"])]
         scene = data.scene(image)
         if scene not in scenes:
@@ -84,8 +87,8 @@ def _sample(layout: Layout, rgb_format: str, image: BopImage, row: dict[str, str
     if obj_id != OBJ_ID:
         raise ScgenError(f"sample {sid}: its first scene_gt.json instance is obj_id {obj_id}, not the target")
     rgb = layout.rgb(split, sid, rgb_format)
-    if not rgb.is_file():
-        raise ScgenError(f"sample {sid}: image missing: {rgb}")
+    if read_image(rgb) is None:  # an export copies or points at it: refused unless it decodes
+        raise ScgenError(f"sample {sid}: cannot read {rgb}: {why_unreadable(rgb)}")
     try:
         info = infos[str(sid)][TARGET_INSTANCE]
     except (KeyError, IndexError) as exc:
