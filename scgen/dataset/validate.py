@@ -294,7 +294,7 @@ def validate_bop_dataset(root: str | Path, progress: bool = True) -> tuple[list[
     for image in tqdm(data.images, desc="validate", unit="img", disable=not progress):
         scene = data.scene(image)
         if scene not in infos:
-            infos[scene] = read_scene_files(scene)["scene_gt_info"]
+            infos[scene] = read_scene_files(scene)[0].get("scene_gt_info")
         entries = (infos[scene] or {}).get(str(image.im_id))
         if entries is None or len(entries) != len(image.instances):
             found = [] if entries is None else entries
