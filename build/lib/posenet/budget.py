@@ -1,0 +1,57 @@
+"""A wall-time budget for training: the schedule's length fitted, while the run goes, to end at the budget.
+
+`posenet train --minutes M` does not guess a step count from a separate probe (whose start-up, loader
+processes and warm-up kernels make it a poor guide to the steady state). It trains: after the first
+`PROBE_STEPS` steps (or a tenth of the budget, if that comes first) it times the recent steps (the
+later half of those done, none of the first `SKIP_STEPS`) and fits the schedule's total so that the
+steps left fill the time left; it refits after every step while the learning rate is flat, so a machine
+that speeds up or slows down moves the end with it, and fixes
+the total when the cosine decay begins (at anneal_point of it), so the decay is one smooth cosine that
+ends at the budget. Everything from the call's start counts: set-up, loader start, checkpoints. Should
+the machine slow down during the decay, the run stops at the budget, the decay not quite at its end.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+SKIP_STEPS = 5  # steps not timed: the first batches wait for the loader processes and warm-up kernels
+PROBE_STEPS = 15  # steps before the first fit, or fewer once PROBE_SHARE of the budget is spent
+PROBE_SHARE = 0.1
+UNFITTED = 2**62  # the total before the first fit: no end in sight, so the learning rate stays flat
+
+
+@dataclass
+class TimeBudget:
+    """The schedule's total steps fitted to `seconds` of wall time from `start`."""
+
+    seconds: float
+    anneal_point: float
+    total: int = UNFITTED  # the schedule's total steps (until the first fit: the lr stays flat)
+    start: float = field(default_factory=time.perf_counter)
+    fitted: bool = False  # the total follows the measured step time
+    frozen: bool = False  # the cosine has begun: the total no longer changes
+    _times: list[float] = field(default_factory=list)  # the time each step ended, from step 1
+
+    @property
+    def deadline(self) -> float:
+        return self.start + self.seconds
+
+    def update(self, step: int, now: float) -> bool:
+        """After `step` steps at time `now`: refit the total while the learning rate is flat. Returns
+        True when this call fixed the total (the cosine begins)."""
+        self._times.append(now)
+        probed = step >= PROBE_STEPS or now - self.start >= PROBE_SHARE * self.seconds
+        if self.frozen or step <= SKIP_STEPS or not probed:
+            return False
+        since = max(SKIP_STEPS, step // 2)  # the step the timed window starts after
+        step_s = (now - self._times[since - 1]) / (step - since)
+        self.total = max(step + 1, step + int((self.deadline - now) / step_s))
+        self.fitted = True
+        if step >= self.anneal_point * self.total:
+            self.frozen = True
+        return self.frozen
+
+    def expired(self, now: float) -> bool:
+        return now >= self.deadline

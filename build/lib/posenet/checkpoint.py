@@ -1,0 +1,45 @@
+"""Checkpoint files: what a run saves each epoch, and the checks that refuse a mismatched one."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from posenet.errors import PosenetError
+from posenet.models import ModelConfig
+from scgen.dataset.atomic import atomic_write_bytes
+
+REQUIRED = ("model", "model_config", "config", "step")
+
+
+def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
+    """Write atomically: a reader (or a crash) never sees half a checkpoint."""
+    buf = io.BytesIO()
+    torch.save(state, buf)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def load_checkpoint(path: Path) -> dict[str, Any]:
+    """A posenet checkpoint on the CPU; anything else is a one-line error."""
+    if not Path(path).is_file():
+        raise PosenetError(f"checkpoint not found: {path}")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for foreign or corrupt files
+        raise PosenetError(f"{path} is not a readable checkpoint: {str(exc).splitlines()[0]}") from exc
+    if not isinstance(state, dict) or any(k not in state for k in REQUIRED):
+        raise PosenetError(f"{path} is not a posenet checkpoint (needs {', '.join(REQUIRED)})")
+    return state
+
+
+def check_model_config(state: dict[str, Any], expected: dict[str, Any], path: Path) -> None:
+    """Refuse a checkpoint written for another network configuration, naming the differing fields. A field
+    the checkpoint predates (e.g. `head_norm`) stands for its default, which is what rebuilds it."""
+    found = {**ModelConfig().to_dict(), **state["model_config"]}
+    if found != expected:
+        diff = sorted(k for k in set(found) | set(expected) if found.get(k) != expected.get(k))
+        detail = ", ".join(f"{k}: {found.get(k)!r} != {expected.get(k)!r}" for k in diff[:4])
+        raise PosenetError(f"checkpoint {path} is from another configuration ({detail})")

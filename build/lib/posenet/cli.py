@@ -1,0 +1,350 @@
+"""The `posenet` command line: parses options and calls the library; errors are one line, exit non-zero."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict
+from pathlib import Path
+
+import click
+import cv2
+import torch
+
+from posenet.amp import AMP_MODES
+from posenet.bench import PAPER, device_label, format_report, resolve_device, run_bench
+from posenet.config import load_config
+from posenet.data.boxes import boxes_from_gt
+from posenet.data.layout import scan_split
+from posenet.detection.detect import detect_split, detection_entries
+from posenet.detection.detector import load_detector_config
+from posenet.detection.train import train_detector
+from posenet.errors import PosenetError
+from posenet.evaluate import (
+    BATCH_SIZE,
+    bop_results_csv,
+    by_factor_table,
+    evaluate_pnp,
+    format_table,
+    json_record,
+    load_model,
+    summary_rows,
+)
+from posenet.evaluate import by_factor as run_by_factor
+from posenet.models import VARIANTS
+from posenet.ransac import PNP_LABELS, PNP_METHODS
+from posenet.train import train as run_train
+from posenet.viz import heatmap_panel, overlay_panel
+from scgen.cli import one_line_errors
+from scgen.dataset.atomic import atomic_write_text
+from scgen.errors import ScgenError
+
+PATH = click.Path(path_type=Path)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="scgen", prog_name="posenet")  # one distribution holds both packages
+def main() -> None:
+    """posenet: GDR-Net / GAP-GDRNet 6D pose networks trained and evaluated on scgen (BOP-layout) datasets."""
+
+
+@main.command()
+@click.option(
+    "--data", type=PATH, required=True, help="Dataset folder (scgen output or BOP layout + xyz maps)."
+)
+@click.option(
+    "--out", type=PATH, required=True, help="Run folder: config.yaml, last.pt, train_log.jsonl, tb/."
+)
+@click.option("--config", "config", default=None, help="paper | smoke | a YAML/TOML file  [default: paper]")
+@click.option(
+    "--variant", default=None, help="gdrnet (default), convnext, ggca, mecs, pgsa, afr, gap-gdrnet."
+)
+@click.option(
+    "--epochs", type=click.IntRange(min=1), default=None, help="Override optim.epochs (sets the schedule)."
+)
+@click.option(
+    "--max-steps", type=click.IntRange(min=1), default=None, help="Stop after N steps (schedule unchanged)."
+)
+@click.option(
+    "--minutes",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Wall-time budget: the schedule is fitted while it runs so that its cosine ends after M minutes "
+    "(set-up included); the fitted steps are printed. A new run only: no --resume or --max-steps.",
+)
+@click.option(
+    "--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config is given)."
+)
+@click.option(
+    "--obj-id",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Object to train on  [default: the config's data.obj_id, 1]",
+)
+@click.option(
+    "--amp",
+    default=None,
+    help=f"Mixed precision, overriding optim.amp: {' | '.join(AMP_MODES)} (auto: bf16 on a CUDA GPU that "
+    "has it, else float32).",  # checked with the config: a bad value is one line, as every other
+)
+@one_line_errors(PosenetError, ScgenError)
+def train(
+    data: Path,
+    out: Path,
+    config: str | None,
+    variant: str | None,
+    epochs: int | None,
+    max_steps: int | None,
+    minutes: float | None,
+    resume: bool,
+    obj_id: int | None,
+    amp: str | None,
+) -> None:
+    """Train on the dataset's train split (under torchrun: DDP over the processes)."""
+    if config is None:
+        saved = out / "config.yaml"
+        config = str(saved) if resume and saved.is_file() else "paper"
+    cfg = load_config(config, variant=variant, epochs=epochs, obj_id=obj_id, amp=amp)
+    ckpt = run_train(data, out, cfg, resume=resume, max_steps=max_steps, minutes=minutes)
+    if os.environ.get("RANK", "0") == "0":  # torchrun: one line, not one per process
+        click.echo(f"checkpoint: {ckpt}")
+
+
+@main.command("eval")
+@click.option("--data", type=PATH, required=True, help="Dataset folder.")
+@click.option(
+    "--ckpt", type=PATH, required=True, multiple=True, help="Checkpoint (repeatable with --by-factor)."
+)
+@click.option("--split", default="test", show_default=True)
+@click.option(
+    "--boxes", type=PATH, default=None, help="Stored detection boxes (BOP JSON); default: GT boxes."
+)
+@click.option(
+    "--json", "json_path", type=PATH, default=None, help="Write the summary (or factor table) as JSON."
+)
+@click.option("--predictions", type=PATH, default=None, help="Per-instance JSONL [default: next to --json].")
+@click.option(
+    "--by-factor", type=PATH, default=None, help="Sample-groups file: per-group ADD@0.02 m (Table 5)."
+)
+@click.option("--workers", type=click.IntRange(min=0), default=2, show_default=True, help="Loader processes.")
+@click.option(
+    "--batch-size",
+    type=click.IntRange(min=1),
+    default=BATCH_SIZE,
+    show_default=True,
+    help="RoIs per forward (the results do not depend on it; latency is timed apart at batch 1).",
+)
+@click.option(
+    "--obj-id",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Object to evaluate  [default: the one the checkpoint was trained on]",
+)
+@click.option("--bop-csv", type=PATH, default=None, help="Also write the estimates as a BOP19 results CSV.")
+@click.option(
+    "--pnp",
+    type=click.Choice(["patch", "ransac", "both"]),
+    default="patch",
+    show_default=True,
+    help="Pose solver: the network's Patch-PnP, OpenCV's PnP-RANSAC on its predicted xyz and mask, or both.",
+)
+@one_line_errors(PosenetError, ScgenError)
+def eval_cmd(
+    data: Path,
+    ckpt: tuple[Path, ...],
+    split: str,
+    boxes: Path | None,
+    json_path: Path | None,
+    predictions: Path | None,
+    by_factor: Path | None,
+    workers: int,
+    batch_size: int,
+    obj_id: int | None,
+    bop_csv: Path | None,
+    pnp: str,
+) -> None:
+    """Rotation/translation error, ADD@0.02 m, ADD@0.1d (and what the rotation and the translation each
+    score alone), ADD-S@0.1d, MSSD, ESA score and batch-1 latency.
+
+    For an object with symmetries (models_info), ADD is ADD-S and the rotation error is also given as
+    the smallest over the symmetric poses of the ground truth. With --pnp both, each figure is given for
+    Patch-PnP and PnP-RANSAC side by side.
+    """
+    methods = PNP_METHODS if pnp == "both" else (pnp,)
+    if bop_csv is not None and len(methods) > 1:
+        raise PosenetError("--bop-csv writes the estimates of one PnP method: --pnp patch or --pnp ransac")
+    if by_factor is not None:
+        if bop_csv is not None:
+            raise PosenetError("--bop-csv writes the estimates of one checkpoint, not a --by-factor table")
+        res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers, batch_size, obj_id, methods)
+        click.echo(f"boxes: {res['boxes']}")
+        click.echo(by_factor_table(res))
+        if json_path is not None:
+            atomic_write_text(json_path, json.dumps(res, indent=2) + "\n")
+        return
+    if len(ckpt) != 1:
+        raise PosenetError("several --ckpt are only compared with --by-factor")
+    results = evaluate_pnp(
+        data, ckpt[0], methods, split, boxes, workers=workers, batch_size=batch_size, obj_id=obj_id
+    )
+    variant, summaries = results[methods[0]].variant, [r.summary for r in results.values()]
+    click.echo(f"boxes: {summaries[0]['boxes']}")
+    columns = ["value"] if methods == ("patch",) else [PNP_LABELS[m] for m in methods]
+    rows = summary_rows(summaries, keys=set().union(*summaries))
+    click.echo(format_table([f"{variant} on {split}", *columns], rows))
+    if predictions is None:
+        predictions = (
+            json_path.with_suffix(".predictions.jsonl")
+            if json_path
+            else ckpt[0].with_name(f"predictions_{split}.jsonl")
+        )
+    records = [{**json_record(r), "pnp": m} for m, res in results.items() for r in res.records]
+    atomic_write_text(predictions, "".join(json.dumps(r) + "\n" for r in records))
+    if json_path is not None:
+        body = summaries[0] if len(methods) == 1 else {m: r.summary for m, r in results.items()}
+        atomic_write_text(
+            json_path, json.dumps({"variant": variant, "split": split, **body}, indent=2) + "\n"
+        )
+    click.echo(f"predictions: {predictions}")
+    if bop_csv is not None:
+        atomic_write_text(bop_csv, bop_results_csv(results[methods[0]].records))
+        click.echo(f"BOP results: {bop_csv}")
+
+
+@main.command("train-detector")
+@click.option("--data", type=PATH, required=True, help="Dataset folder (train split trained, val selects).")
+@click.option("--out", type=PATH, required=True, help="Run folder: config.yaml, last.pt, best.pt, tb/.")
+@click.option(
+    "--config", "config", default=None, help="cpu (alias smoke) | paper | a YAML/TOML file  [default: cpu]"
+)
+@click.option("--max-steps", type=click.IntRange(min=1), default=None, help="Stop after N steps.")
+@click.option("--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config).")
+@click.option("--obj-id", type=click.IntRange(min=1), default=None, help="Object to detect [default: 1].")
+@one_line_errors(PosenetError, ScgenError)
+def train_detector_cmd(
+    data: Path, out: Path, config: str | None, max_steps: int | None, resume: bool, obj_id: int | None
+) -> None:
+    """Train the single-class target detector (FCOS on an ImageNet backbone: `pretrained:` imagenet,
+    package, a local file or null) on the visible boxes (bbox_visib)."""
+    if config is None:
+        saved = out / "config.yaml"
+        config = str(saved) if resume and saved.is_file() else "cpu"
+    cfg = load_detector_config(config, obj_id)
+    click.echo(f"checkpoint: {train_detector(data, out, cfg, resume=resume, max_steps=max_steps)}")
+
+
+@main.command()
+@click.option("--data", type=PATH, required=True, help="Dataset folder.")
+@click.option("--out", type=PATH, required=True, help="Box file to write (BOP detection JSON).")
+@click.option("--split", default="test", show_default=True)
+@click.option("--detector", type=PATH, default=None, help="Detector checkpoint; default: GT boxes.")
+@click.option("--noise", type=click.FloatRange(min=0), default=0.0, show_default=True,
+              help="Relative std of centre shift and log size change (0: exact GT boxes).")  # fmt: skip
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--obj-id", type=click.IntRange(min=1), default=1, show_default=True, help="Object to box.")
+@one_line_errors(PosenetError, ScgenError)
+def boxes(
+    data: Path, out: Path, split: str, detector: Path | None, noise: float, seed: int, obj_id: int
+) -> None:
+    """Write one box per image of a split: the detector's (misses recorded), else the GT full-object boxes,
+    optionally perturbed."""
+    if detector is None:
+        insts = [i for i in scan_split(data, split, obj_id) if i.px_count_visib > 0]
+        entries = boxes_from_gt(insts, noise, seed)
+        label = "ground-truth"
+    else:
+        device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+        _, dets, _ = detect_split(detector, data, split, obj_id, device)
+        entries = detection_entries(dets, obj_id, f"detector:{detector}")
+        label = f"detector ({sum(d.box is None for d in dets)} misses)"
+    atomic_write_text(out, json.dumps(entries) + "\n")
+    click.echo(f"{len(entries)} {label} boxes -> {out}")
+
+
+@main.command("bench")
+@click.option(
+    "--variant",
+    "variants",
+    multiple=True,
+    type=click.Choice(list(VARIANTS)),
+    help="Variant to bench (repeatable); default: all.",
+)
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--warmup", type=click.IntRange(min=0), default=3, show_default=True, help="Untimed forwards.")
+@click.option("--iters", type=click.IntRange(min=1), default=10, show_default=True, help="Timed forwards.")
+@click.option("--threads", type=click.IntRange(min=1), help="CPU intra-op threads (default: torch's).")
+@click.option("--smoke", is_flag=True, help="Bench the reduced-width CPU presets instead of the paper's.")
+@click.option("--backbone", help="Any timm backbone with a stride-32 map, instead of the preset's.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Also write JSON.")
+@click.option(
+    "--onnx", is_flag=True, help="Also export each variant to ONNX and time it in onnxruntime (CPU)."
+)
+@one_line_errors(PosenetError, ScgenError)
+def bench(
+    variants: tuple[str, ...],
+    device: str,
+    warmup: int,
+    iters: int,
+    threads: int | None,
+    smoke: bool,
+    backbone: str | None,
+    json_path: Path | None,
+    onnx: bool,
+) -> None:
+    """Params, MACs and batch-1 latency / FPS of the pose-network variants (architecture only, random
+    init: no weights needed); with --onnx, onnxruntime's latency beside torch's."""
+    if threads:
+        torch.set_num_threads(threads)
+    dev = resolve_device(device)
+    rows = run_bench(list(variants or VARIANTS), dev, warmup, iters, smoke, backbone, onnx)
+    label = device_label(dev)
+    click.echo(format_report(rows, label, paper={} if smoke else PAPER))
+    if json_path:
+        payload = {"device": label, "variants": [asdict(r) for r in rows]}
+        json_path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
+@main.command("export")
+@click.option("--ckpt", type=PATH, required=True, help="Pose checkpoint (last.pt).")
+@click.option("--onnx", "onnx_path", type=PATH, required=True, help="ONNX file to write.")
+@one_line_errors(PosenetError, ScgenError)
+def export_cmd(ckpt: Path, onnx_path: Path) -> None:
+    """Export a pose network to ONNX (opset 18, dynamic batch): inputs roi_img, roi_coord2d; outputs mask,
+    xyz, region, rot6d, site. Checks onnxruntime's outputs against torch's on a random batch of 2."""
+    from posenet.export import OPSET, export_onnx, max_difference, onnx_session  # ~0.6 s: only here
+
+    model, _ = load_model(ckpt, torch.device("cpu"))
+    export_onnx(model, onnx_path)
+    diff = max_difference(model, onnx_session(onnx_path))
+    click.echo(f"onnx: {onnx_path} (opset {OPSET}, dynamic batch); max |onnxruntime - torch| = {diff:.2e}")
+
+
+@main.command()
+@click.option("--data", type=click.Path(path_type=Path), required=True, help="Dataset folder.")
+@click.option(
+    "--ckpt",
+    "ckpts",
+    type=click.Path(path_type=Path, exists=True),
+    multiple=True,
+    required=True,
+    help="Checkpoint; repeat to compare models side by side.",
+)
+@click.option("--samples", required=True, help="Comma-separated sample ids (im_id), e.g. 3,17,42.")
+@click.option("--split", default="test", show_default=True)
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for the PNGs.")
+@one_line_errors(PosenetError, ScgenError)
+def viz(data: Path, ckpts: tuple[Path, ...], samples: str, split: str, out: Path) -> None:
+    """Pose overlays (predicted green vs GT white contour) and feature-response heat maps, as PNGs."""
+    try:
+        ids = [int(s) for s in samples.split(",") if s.strip()]
+    except ValueError as exc:
+        raise PosenetError(f"--samples must be comma-separated integers, got '{samples}'") from exc
+    out.mkdir(parents=True, exist_ok=True)
+    for name, panel in (("poses.png", overlay_panel(data, split, list(ckpts), ids)),
+                        ("features.png", heatmap_panel(data, split, list(ckpts), ids))):  # fmt: skip
+        cv2.imwrite(str(out / name), panel)
+        click.echo(f"wrote {out / name}")
+
+
+if __name__ == "__main__":  # `python -m posenet.cli`, e.g. under `torchrun -m`
+    main()

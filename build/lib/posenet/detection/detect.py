@@ -1,0 +1,137 @@
+"""Running a trained detector: its checkpoint, one box per image, and the box metrics (IoU, AP50, misses).
+
+A detection is the highest-scoring box of an image; an image with none above the score threshold is a
+miss (None). Boxes are [x0, y0, x1, y1] pixel edges, the convention of `detector.visible_boxes`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader
+from torchvision.models.detection import FCOS
+
+from posenet.checkpoint import load_checkpoint
+from posenet.data.boxes import miss_entry
+from posenet.data.layout import Instance
+from posenet.detection.detector import (
+    DetectionDataset,
+    build_detector,
+    collate,
+    detector_config_from_dict,
+    image_groups,
+)
+from posenet.errors import PosenetError
+
+
+@dataclass(frozen=True)
+class Detection:
+    """The detector's answer for one image: its best box and score (box None: a miss) and the seconds
+    of its forward."""
+
+    key: tuple[int, int]  # (scene_id, im_id)
+    box: tuple[float, float, float, float] | None
+    score: float
+    time_s: float
+
+
+def load_detector(ckpt: Path, device: torch.device) -> tuple[FCOS, dict[str, Any]]:
+    """The network of a detector checkpoint, in eval mode on `device`, and the checkpoint itself."""
+    state = load_checkpoint(ckpt)
+    if "arch" not in state["model_config"]:
+        raise PosenetError(f"{ckpt} is not a detector checkpoint (it has no model_config.arch)")
+    model = build_detector(state["model_config"])
+    model.load_state_dict(state["model"])
+    return model.to(device).eval(), state
+
+
+@torch.inference_mode()
+def detect(model: FCOS, dataset: DetectionDataset, device: torch.device) -> list[Detection]:
+    """The best box of each image of the dataset, one image per forward (the batch-1 latency is its time)."""
+    model.eval()
+    out = []
+    for i, (images, _) in enumerate(DataLoader(dataset, batch_size=1, collate_fn=collate)):
+        tic = time.perf_counter()
+        pred = model([im.to(device) for im in images])[0]
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+        toc = time.perf_counter() - tic
+        key = dataset.images[i][0].key
+        if len(pred["scores"]) == 0:
+            out.append(Detection(key, None, 0.0, toc))
+        else:
+            best = int(pred["scores"].argmax())
+            box = tuple(float(v) for v in pred["boxes"][best])
+            out.append(Detection(key, box, float(pred["scores"][best]), toc))
+    return out
+
+
+def detect_split(
+    ckpt: Path, data: Path, split: str, obj_id: int, device: torch.device
+) -> tuple[list[list[Instance]], list[Detection], dict[str, Any]]:
+    """The detector checkpoint run over the split's images that show `obj_id`: those images (each its
+    instances), their detections, and the checkpoint."""
+    model, state = load_detector(ckpt, device)
+    images = image_groups(data, split, obj_id)
+    return images, detect(model, detector_dataset(state, images), device), state
+
+
+def detector_dataset(state: dict[str, Any], images: list) -> DetectionDataset:
+    """The evaluation dataset of `images` as the checkpoint's run reads them (no augmentation)."""
+    return DetectionDataset(images, detector_config_from_dict(state["config"]), train=False)
+
+
+def iou(a: tuple[float, ...] | None, b: np.ndarray) -> float:
+    """IoU of box `a` (None: 0) with the first box of `b` ((n, 4); an empty `b` gives 0)."""
+    if a is None or len(b) == 0:
+        return 0.0
+    bx = b[0]
+    w = max(0.0, min(a[2], bx[2]) - max(a[0], bx[0]))
+    h = max(0.0, min(a[3], bx[3]) - max(a[1], bx[1]))
+    inter = w * h
+    union = (a[2] - a[0]) * (a[3] - a[1]) + (bx[2] - bx[0]) * (bx[3] - bx[1]) - inter
+    return float(inter / union) if union > 0 else 0.0
+
+
+def box_metrics(dets: list[Detection], gt: list[np.ndarray]) -> dict[str, float]:
+    """Mean IoU (a miss counts 0), the share of images at IoU >= 0.5, AP50 (single class, all-point
+    interpolated; one detection per image) and misses, over images whose target is visible (gt[i]: the
+    visible boxes of dets[i])."""
+    pairs = [(d, g) for d, g in zip(dets, gt, strict=True) if len(g)]
+    ious = [iou(d.box, g) for d, g in pairs]
+    order = sorted(
+        (i for i, (d, _) in enumerate(pairs) if d.box is not None), key=lambda i: -pairs[i][0].score
+    )
+    tp = np.array([ious[i] >= 0.5 for i in order], float)
+    ap = 0.0
+    if len(pairs) and len(tp):
+        recall = np.cumsum(tp) / len(pairs)
+        precision = np.cumsum(tp) / np.arange(1, len(tp) + 1)
+        precision = np.maximum.accumulate(precision[::-1])[::-1]  # the envelope: best precision at >= recall
+        ap = float(np.sum(np.diff(np.concatenate([[0.0], recall])) * precision))
+    return {
+        "n": len(pairs),
+        "mean_iou": float(np.mean(ious)) if ious else float("nan"),
+        "iou50": float(np.mean([v >= 0.5 for v in ious])) if ious else float("nan"),
+        "ap50": ap,
+        "misses": sum(d.box is None for d, _ in pairs),
+    }
+
+
+def detection_entries(dets: list[Detection], obj_id: int, source: str) -> list[dict]:
+    """The detections as a box file (posenet.data.boxes): [x, y, w, h] pixel boxes, a miss as miss_entry."""
+    out = []
+    for d in dets:
+        if d.box is None:
+            out.append(miss_entry(*d.key, obj_id, d.time_s, source))
+            continue
+        x0, y0, x1, y1 = d.box
+        bbox = [round(v, 2) for v in (x0, y0, x1 - x0, y1 - y0)]
+        out.append({"scene_id": d.key[0], "image_id": d.key[1], "category_id": obj_id, "bbox": bbox,
+                    "score": round(d.score, 4), "time": d.time_s, "source": source})  # fmt: skip
+    return out

@@ -1,0 +1,303 @@
+"""The target detector of the paper's protocol: its configuration, the torchvision FCOS network and its data.
+
+One class (the target object) is learned from the visible box `bbox_visib`, since the pose network's
+crop should cover what is seen. The backbone starts from ImageNet weights, loaded as the pose network's
+are (`pretrained`, posenet.models.backbone): `cpu` FCOS over the package-shipped EfficientNet-Lite0 with
+an FPN over strides 8-32 (the benchmark's targets are mostly 10-64 px), `paper` torchvision's
+FCOS-ResNet50-FPN on timm's ImageNet ResNet-50. `pretrained: null` trains from random init.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+from torch import Tensor, nn
+from torch.utils.data import Dataset
+from torchvision.models.detection import FCOS, fcos_resnet50_fpn
+from torchvision.models.detection.anchor_utils import AnchorGenerator
+from torchvision.models.detection.fcos import FCOSHead
+from torchvision.ops import FeaturePyramidNetwork
+
+from posenet.config import OptimConfig, override_fields, plain, read_config_file
+from posenet.data.augment import brightness_contrast
+from posenet.data.layout import Instance, scan_split
+from posenet.errors import PosenetError
+from posenet.models.backbone import IMAGENET, PACKAGE, initial_weights, input_mean_std, timm_features
+
+PRESETS = ("cpu", "paper")
+ALIASES = {"smoke": "cpu"}
+ARCHS = ("fcos-timm-fpn", "fcos-resnet50-fpn")
+POSE_ONLY_OPTIM = ("amp", "grad_centralization")  # OptimConfig fields only pose training reads
+STRIDES = (2, 4, 8, 16, 32)  # the backbone strides fcos-timm-fpn may predict at (min_stride ... 32)
+
+
+@dataclass
+class DetectorConfig:
+    """Network, input size, augmentations (per-image probabilities) and optimisation of a detector run."""
+
+    preset: str = "paper"
+    arch: str = "fcos-resnet50-fpn"
+    backbone: str = "tf_efficientnet_lite0"  # fcos-timm-fpn: the timm model
+    fpn_channels: int = 64  # fcos-timm-fpn: channels of the FPN levels and the FCOS head
+    min_stride: int = 8  # fcos-timm-fpn: FCOS predicts at the backbone strides min_stride ... 32
+    head_convs: int = 4  # fcos-timm-fpn: conv layers of each FCOS head branch
+    # where the backbone's weights come from: imagenet | package | a local file | None (random init)
+    pretrained: str | None = IMAGENET
+    min_size: int = 800  # images are resized so the short side is min_size (long side <= max_size)
+    max_size: int = 1333
+    score_thresh: float = 0.05  # detections below are dropped; an image left without any is a miss
+    obj_id: int = 1
+    color_prob: float = 0.8  # brightness/contrast, as the pose network's (data.augment)
+    brightness: tuple[float, float] = (0.5, 1.5)
+    contrast: tuple[float, float] = (0.5, 1.5)
+    zoom_prob: float = 0.8  # scale: the image zoomed about a random point, the target kept inside
+    zoom: tuple[float, float] = (0.6, 1.6)
+    flip_prob: float = 0.5  # horizontal mirror
+    paste_prob: float = 0.5  # copy-paste: the visible target of another training image pasted in as well
+    workers: int = 2
+    optim: OptimConfig = field(
+        default_factory=lambda: OptimConfig(lr=1e-3, batch_size=16, epochs=50, warmup_iters=500)
+    )
+
+    def model_dict(self) -> dict[str, Any]:
+        """What fixes the network's weights layout and inference: saved as the checkpoint's model_config."""
+        keys = ["arch", "backbone", "fpn_channels", "min_stride", "head_convs"]
+        keys += ["min_size", "max_size", "score_thresh"]
+        return {k: getattr(self, k) for k in keys}
+
+    def to_dict(self) -> dict[str, Any]:
+        return plain(dataclasses.asdict(self))
+
+
+def cpu_config() -> DetectorConfig:
+    """The CPU preset: FCOS on the package-shipped ImageNet EfficientNet-Lite0 + FPN at the rendered size
+    of the test datasets (320x240)."""
+    return DetectorConfig(
+        preset="cpu",
+        arch="fcos-timm-fpn",
+        pretrained=PACKAGE,
+        min_size=240,
+        max_size=320,
+        workers=0,
+        # lr 1e-3, not the 3e-3 random init wanted: the ImageNet features are to be tuned, not relearned
+        optim=OptimConfig(lr=1e-3, batch_size=4, epochs=18, warmup_iters=20, weight_decay=1e-4, log_every=1),
+    )
+
+
+def load_detector_config(name_or_path: str, obj_id: int | None = None) -> DetectorConfig:
+    """A preset name (cpu, its alias smoke, paper) or a YAML/TOML file (`preset:` plus any field)."""
+    name = ALIASES.get(name_or_path, name_or_path)
+    if name not in PRESETS and not Path(name_or_path).is_file():
+        raise PosenetError(
+            f"detector config {name_or_path!r} is neither a preset (cpu, smoke, paper) nor a file"
+        )
+    raw = {"preset": name} if name in PRESETS else read_config_file(Path(name_or_path))
+    cfg = detector_config_from_dict(raw)
+    if obj_id is not None:
+        cfg.obj_id = obj_id
+    return cfg
+
+
+def detector_config_from_dict(raw: dict[str, Any]) -> DetectorConfig:
+    """The named preset, then every given field (a checkpoint's `config` reloads to the same config)."""
+    raw = dict(raw)
+    name = raw.pop("preset", "paper")
+    preset = ALIASES.get(name, name)
+    if preset not in PRESETS:
+        raise PosenetError(f"detector preset must be one of {', '.join(PRESETS)}, got {name!r}")
+    cfg = cpu_config() if preset == "cpu" else DetectorConfig()
+    optim = raw.pop("optim", None)
+    if optim is not None:
+        changed = [k for k in POSE_ONLY_OPTIM if k in optim and optim[k] != getattr(OptimConfig(), k)]
+        if changed:
+            raise PosenetError(f"optim.{changed[0]} is a pose-training option, not the detector's")
+        cfg.optim = override_fields(cfg.optim, optim, "optim")
+    cfg = override_fields(cfg, raw, "detector")
+    if cfg.arch not in ARCHS:
+        raise PosenetError(f"detector arch must be one of {', '.join(ARCHS)}, got {cfg.arch!r}")
+    sizes = {k: getattr(cfg, k) for k in ("fpn_channels", "head_convs", "min_size", "max_size")}
+    sizes |= {f"optim.{k}": getattr(cfg.optim, k) for k in ("batch_size", "epochs")}
+    for name, value in sizes.items():
+        if value < 1:
+            raise PosenetError(f"detector {name} must be >= 1, got {value}")
+    if cfg.min_stride not in STRIDES:
+        raise PosenetError(f"detector min_stride must be one of {list(STRIDES)}, got {cfg.min_stride}")
+    return cfg
+
+
+class TimmFpn(nn.Module):
+    """A timm backbone's maps at `strides` through torchvision's FPN: the levels FCOS predicts from."""
+
+    def __init__(self, name: str, channels: int, strides: list[int], pretrained: str | None = None) -> None:
+        super().__init__()
+        self.body = timm_features(name, pretrained, (0, 1, 2, 3, 4))
+        reductions = self.body.feature_info.reduction()
+        if not set(strides) <= set(reductions):
+            raise PosenetError(f"detector strides {strides} are not among {name}'s {reductions}")
+        self.levels = [reductions.index(s) for s in strides]
+        self.fpn = FeaturePyramidNetwork(
+            [self.body.feature_info.channels()[i] for i in self.levels], channels
+        )
+        self.out_channels = channels
+
+    def forward(self, x: Tensor) -> OrderedDict[str, Tensor]:
+        maps = self.body(x)
+        return self.fpn(OrderedDict((str(i), maps[i]) for i in self.levels))
+
+
+def build_detector(model_config: dict[str, Any], pretrained: str | None = None) -> FCOS:
+    """The FCOS network of a `DetectorConfig.model_dict()` (classes: background, target), its backbone
+    initialised from `pretrained` (posenet.models.backbone) or random init. Images are normalised as the
+    backbone's ImageNet weights expect (timm's pretrained_cfg mean / std)."""
+    kw = {k: model_config[k] for k in ("min_size", "max_size", "score_thresh")} | {"detections_per_img": 10}
+    if model_config["arch"] == "fcos-resnet50-fpn":
+        model = fcos_resnet50_fpn(weights=None, weights_backbone=None, num_classes=2, **kw)
+        weights = initial_weights("resnet50", pretrained)
+        if weights is not None:  # timm and torchvision share ResNet keys; FCOS has no classifier
+            model.backbone.body.load_state_dict({k: v for k, v in weights.items() if not k.startswith("fc.")})
+    else:
+        # one anchor per location, its size the level's stride: FCOS then assigns a box to the level
+        # whose [4, 8] x stride range holds its largest side distance, and samples centres within 1.5 strides
+        strides = [s for s in STRIDES if s >= model_config["min_stride"]]
+        anchors = AnchorGenerator(sizes=tuple((s,) for s in strides), aspect_ratios=((1.0,),) * len(strides))
+        channels = model_config["fpn_channels"]
+        backbone = TimmFpn(model_config["backbone"], channels, strides, pretrained)
+        head = FCOSHead(channels, 1, 2, num_convs=model_config["head_convs"])
+        mean, std = input_mean_std(backbone.body)
+        model = FCOS(backbone, num_classes=2, anchor_generator=anchors, head=head, **kw,
+                     image_mean=list(mean), image_std=list(std))  # fmt: skip
+    # the box distances pass a ReLU: starting them at 1 anchor size, not 0, keeps half of them from dying
+    # at once (from random init with lr 1e-3 every one did, and every box had size 0)
+    nn.init.constant_(model.head.regression_head.bbox_reg.bias, 1.0)
+    return model
+
+
+def image_groups(root: Path, split: str, obj_id: int) -> list[list[Instance]]:
+    """The split's images that show object `obj_id` in the annotations, each as its list of instances."""
+    groups: dict[tuple[int, int], list[Instance]] = {}
+    for inst in scan_split(root, split, obj_id):
+        groups.setdefault(inst.key, []).append(inst)
+    return list(groups.values())
+
+
+def visible_boxes(instances: list[Instance]) -> np.ndarray:
+    """(n, 4) float32 [x0, y0, x1, y1] pixel-edge boxes of the instances with a visible pixel (bbox_visib)."""
+    boxes = [(x, y, x + w, y + h) for i in instances if i.px_count_visib > 0 for x, y, w, h in [i.bbox_visib]]
+    return np.array(boxes, np.float32).reshape(-1, 4)
+
+
+def random_zoom(
+    img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator, scale: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The image scaled by s ~ U(scale) on a canvas of its own size (black outside), shifted at random but
+    keeping the targets' union box inside where it fits; the boxes moved alike."""
+    h, w = img.shape[:2]
+    s = rng.uniform(*scale)
+    if len(boxes):
+        x0, y0 = boxes[:, :2].min(0) * s
+        x1, y1 = boxes[:, 2:].max(0) * s
+    else:
+        x0, y0, x1, y1 = 0.0, 0.0, w * s, h * s
+    tx = rng.uniform(-x0, w - x1) if w - x1 >= -x0 else (w - x0 - x1) / 2
+    ty = rng.uniform(-y0, h - y1) if h - y1 >= -y0 else (h - y0 - y1) / 2
+    out = cv2.warpAffine(img, np.float32([[s, 0, tx], [0, s, ty]]), (w, h), flags=cv2.INTER_LINEAR)
+    moved = boxes * s + np.float32([tx, ty, tx, ty])
+    moved[:, 0::2] = moved[:, 0::2].clip(0, w)
+    moved[:, 1::2] = moved[:, 1::2].clip(0, h)
+    return out, moved[(moved[:, 2] - moved[:, 0] >= 1) & (moved[:, 3] - moved[:, 1] >= 1)]
+
+
+def _read_rgb(path: Path) -> np.ndarray:
+    """An image as float32 RGB in [0, 1]."""
+    return cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB).astype(np.float32) / 255
+
+
+def paste_target(
+    img: np.ndarray,
+    boxes: np.ndarray,
+    donor: list[Instance],
+    rng: np.random.Generator,
+    scale: tuple[float, float],
+    tries: int = 10,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Copy-paste: the visible pixels (mask_visib) of the donor's first visible instance, scaled by
+    s ~ U(scale), pasted at a random place clear of `boxes`; its box appended. Unchanged when the donor
+    shows nothing or no clear place is found in `tries`."""
+    shown = [i for i in donor if i.px_count_visib > 0]
+    if not shown:
+        return img, boxes
+    x0, y0, x1, y1 = (int(v) for v in visible_boxes(shown[:1])[0])
+    mask = cv2.imread(str(shown[0].mask_visib), cv2.IMREAD_GRAYSCALE)[y0:y1, x0:x1] > 0
+    patch, s = _read_rgb(shown[0].rgb)[y0:y1, x0:x1], rng.uniform(*scale)
+    h, w = img.shape[:2]
+    size = (max(1, round(patch.shape[1] * s)), max(1, round(patch.shape[0] * s)))
+    if size[0] >= w or size[1] >= h:
+        return img, boxes
+    patch = cv2.resize(patch, size, interpolation=cv2.INTER_LINEAR)
+    alpha = cv2.resize(mask.astype(np.float32), size, interpolation=cv2.INTER_LINEAR)[..., None]
+    for _ in range(tries):
+        px, py = int(rng.integers(w - size[0] + 1)), int(rng.integers(h - size[1] + 1))
+        new = np.float32([px, py, px + size[0], py + size[1]])
+        clear = (
+            (new[2] <= boxes[:, 0])
+            | (new[0] >= boxes[:, 2])
+            | (new[3] <= boxes[:, 1])
+            | (new[1] >= boxes[:, 3])
+        )
+        if clear.all():
+            out = img.copy()
+            region = out[py : py + size[1], px : px + size[0]]
+            region[:] = alpha * patch + (1 - alpha) * region
+            return out, np.concatenate([boxes, new[None]])
+    return img, boxes
+
+
+def hflip(img: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The image mirrored left-right and its [x0, y0, x1, y1] pixel-edge boxes alike."""
+    w = img.shape[1]
+    return img[:, ::-1], np.stack([w - boxes[:, 2], boxes[:, 1], w - boxes[:, 0], boxes[:, 3]], 1)
+
+
+class DetectionDataset(Dataset):
+    """One item per image: (3, H, W) float RGB in [0, 1] and its FCOS target {boxes, labels} (bbox_visib).
+
+    With `train`, each image is augmented (copy-paste, zoom, mirror, brightness/contrast) from a generator
+    seeded by (seed, epoch, index): the same run sees the same images, whatever the loader processes.
+    """
+
+    def __init__(self, images: list[list[Instance]], cfg: DetectorConfig, train: bool, seed: int = 0) -> None:
+        self.images, self.cfg, self.train, self.seed, self.epoch = images, cfg, train, seed, 0
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    def __getitem__(self, index: int) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        insts = self.images[index]
+        img = _read_rgb(insts[0].rgb)
+        boxes = visible_boxes(insts)
+        if self.train:
+            rng = np.random.default_rng([self.seed, self.epoch, index])
+            c = self.cfg
+            if rng.random() < c.paste_prob:
+                donor = self.images[int(rng.integers(len(self.images)))]
+                img, boxes = paste_target(img, boxes, donor, rng, c.zoom)
+            if rng.random() < c.zoom_prob:
+                img, boxes = random_zoom(img, boxes, rng, c.zoom)
+            if rng.random() < c.flip_prob:
+                img, boxes = hflip(img, boxes)
+            if rng.random() < c.color_prob:
+                img = brightness_contrast(img, rng, c.brightness, c.contrast)
+        target = {"boxes": torch.from_numpy(boxes), "labels": torch.ones(len(boxes), dtype=torch.int64)}
+        return torch.from_numpy(np.ascontiguousarray(img.transpose(2, 0, 1))), target
+
+
+def collate(batch: list[tuple[torch.Tensor, dict]]) -> tuple[list[torch.Tensor], list[dict]]:
+    """Lists of images and targets, as torchvision's detection models take them."""
+    return [b[0] for b in batch], [b[1] for b in batch]

@@ -1,0 +1,189 @@
+"""Training the detector: the train split, selected on val, in a run folder like pose training's.
+
+OUT holds config.yaml, train_log.jsonl, tb/, last.pt (rewritten every ckpt_every epochs and at the stop)
+and best.pt: the checkpoint with the highest val mean IoU so far (misses count 0), scored whenever
+last.pt is written. Without a val split (or no image in it), best.pt is not written.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+import yaml
+from torch.utils.data import DataLoader
+from torchvision.models.detection import FCOS
+
+from posenet.checkpoint import load_checkpoint, save_checkpoint
+from posenet.detection.detect import box_metrics, detect
+from posenet.detection.detector import (
+    DetectionDataset,
+    DetectorConfig,
+    build_detector,
+    collate,
+    image_groups,
+    visible_boxes,
+)
+from posenet.errors import PosenetError
+from posenet.train import (
+    LAST,
+    RunLog,
+    before_loader_fork,
+    make_optimizer,
+    memory_format,
+    pin_cpu_threads,
+    stop_step,
+    worker_init,
+)
+from scgen.dataset.atomic import atomic_write_text
+
+BEST = "best.pt"
+
+
+def train_detector(
+    data: Path, out: Path, cfg: DetectorConfig, resume: bool = False, max_steps: int | None = None
+) -> Path:
+    """Train on `data`'s train split into `out` on the current device; returns the path of last.pt."""
+    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    o = cfg.optim
+    if not resume and (out / LAST).exists():
+        raise PosenetError(f"{out} already holds a run ({LAST}); pass --resume or choose another --out")
+    train_set = DetectionDataset(image_groups(data, "train", cfg.obj_id), cfg, train=True, seed=o.seed)
+    per_epoch = len(train_set) // o.batch_size
+    if per_epoch == 0:
+        raise PosenetError(f"{len(train_set)} training images are fewer than one batch of {o.batch_size}")
+    val = _val_images(data, cfg.obj_id)
+    total = o.epochs * per_epoch
+    stop = stop_step(total, max_steps, o.epochs, per_epoch, announce=True)
+    if device.type == "cpu":
+        pin_cpu_threads(o.threads)
+    torch.manual_seed(o.seed)
+    # channels-last weights make every convolution's output channels-last on a CPU (FCOS batches the images)
+    model = build_detector(cfg.model_dict(), cfg.pretrained).to(device, memory_format=memory_format(device))
+    optimizer, scheduler = make_optimizer(model, o, total)
+    step, best = 0, -math.inf
+    if resume:
+        state = load_checkpoint(out / LAST)
+        if state["model_config"] != cfg.model_dict():
+            raise PosenetError(f"{out / LAST} is from another detector configuration")
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        scheduler.load_state_dict(state["scheduler"])
+        step, best = int(state["step"]), float(state["best_val_iou"])
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    log = RunLog(out, step, stop, o.log_every)
+    try:
+        while step < stop:
+            epoch, skip = divmod(step, per_epoch)
+            step = _epoch(model, optimizer, scheduler, train_set, epoch, skip, step, stop, cfg, device, log)
+            if step >= stop or (epoch + 1) % o.ckpt_every == 0:
+                best = _save(out, model, optimizer, scheduler, cfg, step, best, val, device, log)
+    finally:
+        log.close()
+    return out / LAST
+
+
+def _val_images(data: Path, obj_id: int) -> list | None:
+    """The val split's images, or None when the dataset has no val split."""
+    try:
+        return image_groups(data, "val", obj_id) or None
+    except PosenetError:
+        return None
+
+
+def _epoch(
+    model: FCOS,
+    optimizer: torch.optim.Optimizer,
+    scheduler: torch.optim.lr_scheduler.LambdaLR,
+    dataset: DetectionDataset,
+    epoch: int,
+    skip: int,
+    step: int,
+    stop: int,
+    cfg: DetectorConfig,
+    device: torch.device,
+    log: RunLog,
+) -> int:
+    """The epoch's shuffled batches (a fixed permutation per (seed, epoch)) from batch `skip` up to the stop
+    step, one optimisation step each; returns the step reached."""
+    o = cfg.optim
+    dataset.epoch = epoch
+    order = torch.randperm(len(dataset), generator=torch.Generator().manual_seed(o.seed * 100003 + epoch))
+    batches = order[: len(order) // o.batch_size * o.batch_size].view(-1, o.batch_size)[skip:]
+    if cfg.workers > 0:
+        before_loader_fork()
+    loader = DataLoader(
+        dataset, batch_sampler=batches.tolist(), num_workers=cfg.workers, collate_fn=collate,
+        worker_init_fn=worker_init,
+    )  # fmt: skip
+    model.train()
+    tic = time.perf_counter()
+    for images, targets in loader:
+        lr = optimizer.param_groups[0]["lr"]
+        terms = detector_step(model, optimizer, images, targets, device)
+        scheduler.step()
+        step += 1
+        toc = time.perf_counter()
+        loss = sum(terms.values())
+        log.step({"step": step, "epoch": epoch, "lr": lr, "step_s": toc - tic, "loss": loss, **terms})
+        tic = toc
+        if step >= stop:
+            break
+    return step
+
+
+def detector_step(
+    model: FCOS,
+    optimizer: torch.optim.Optimizer,
+    images: list[torch.Tensor],
+    targets: list[dict[str, torch.Tensor]],
+    device: torch.device,
+) -> dict[str, float]:
+    """One optimisation step on a batch (FCOS's summed losses); returns each loss term."""
+    losses = model([i.to(device) for i in images], [{k: v.to(device) for k, v in t.items()} for t in targets])
+    optimizer.zero_grad(set_to_none=True)
+    sum(losses.values()).backward()
+    optimizer.step()
+    return {k: float(v.detach()) for k, v in losses.items()}
+
+
+def _save(
+    out: Path,
+    model: FCOS,
+    optimizer: torch.optim.Optimizer,
+    scheduler: torch.optim.lr_scheduler.LambdaLR,
+    cfg: DetectorConfig,
+    step: int,
+    best: float,
+    val: list | None,
+    device: torch.device,
+    log: RunLog,
+) -> float:
+    """Write last.pt, and best.pt when the val mean IoU beats `best`; returns the best so far."""
+    metrics: dict[str, Any] = {}
+    if val is not None:
+        dets = detect(model, DetectionDataset(val, cfg, train=False), device)
+        metrics = box_metrics(dets, [visible_boxes(v) for v in val])
+        for k in ("mean_iou", "ap50", "misses"):
+            log.tb.add_scalar(f"val/{k}", metrics[k], step)
+        log.bar.write(f"step {step}: val mean IoU {metrics['mean_iou']:.3f}, AP50 {metrics['ap50']:.3f}")
+    improved = val is not None and metrics["mean_iou"] > best
+    best = metrics["mean_iou"] if improved else best
+    state = {
+        "model": model.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "scheduler": scheduler.state_dict(),
+        "step": step,
+        "model_config": cfg.model_dict(),
+        "config": cfg.to_dict(),
+        "val": metrics,
+        "best_val_iou": best,
+    }
+    save_checkpoint(out / LAST, state)
+    if improved:
+        save_checkpoint(out / BEST, state)
+    return best

@@ -1,0 +1,511 @@
+"""Training: Ranger (RAdam + Lookahead), warmup + flat + cosine per iteration, checkpoints, resume, DDP.
+
+Run as `posenet train` (one process) or under `torchrun --nproc-per-node N` (DDP: NCCL on GPUs, gloo on
+CPU). The batch size in the config is global and split over the processes. Every step appends one line
+to OUT/train_log.jsonl; OUT/last.pt is rewritten after each epoch and when --max-steps stops the run.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import torch
+import torch.distributed as dist
+from timm.optim import create_optimizer_v2
+from torch.nn.parallel import DistributedDataParallel
+from torch.optim.lr_scheduler import LambdaLR
+from torch.utils.data import DataLoader
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
+
+from posenet.amp import Precision
+from posenet.budget import PROBE_STEPS, TimeBudget
+from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
+from posenet.config import OptimConfig, TrainConfig, config_from_dict
+from posenet.data import EpochSampler, PoseDataset, open_split
+from posenet.data.object_model import ObjectModel
+from posenet.errors import PosenetError
+from posenet.losses import LOSS_TERMS, PmObject, pose_losses
+from posenet.models import PoseNet, create_model
+from scgen.dataset.atomic import atomic_write_text
+
+LOG_FILE = "train_log.jsonl"
+LAST = "last.pt"
+RANGER_BETAS = (0.95, 0.999)  # GDRNPP's Ranger; timm's Lookahead defaults (alpha 0.5, k 6) match it too
+
+
+def lr_factor(it: int, total: int, o: OptimConfig) -> float:
+    """GDRNPP's flat_and_anneal: linear warmup from warmup_factor, flat, cosine to 0 from anneal_point."""
+    warm = 1.0
+    if it < o.warmup_iters:
+        alpha = it / o.warmup_iters
+        warm = o.warmup_factor * (1 - alpha) + alpha
+    start = o.anneal_point * total
+    if it < start or total <= start:
+        return warm
+    return warm * 0.5 * (1 + math.cos(math.pi * (it - start) / (total - start)))
+
+
+def steps_per_epoch(n_instances: int, o: OptimConfig, world: int = 1) -> int:
+    """Optimisation steps per epoch over `n_instances` (EpochSampler drops an incomplete global batch)."""
+    steps = EpochSampler(n_instances, o.batch_size // world, world).steps_per_epoch
+    if steps == 0:
+        raise PosenetError(f"{n_instances} training samples are fewer than one batch of {o.batch_size}")
+    return steps
+
+
+def pin_cpu_threads(threads: int) -> None:
+    """Fix the intra-op thread count (0: one per core) and make torch pick deterministic kernels.
+
+    The float summation order depends on the thread count, and any code in the process may have changed
+    it (e.g. `posenet bench --threads`), so training sets it itself: same config and seed, same losses.
+    """
+    torch.set_num_threads(threads or os.cpu_count() or 1)
+    torch.use_deterministic_algorithms(True, warn_only=True)
+
+
+def worker_init(_: int) -> None:
+    """One thread per loader process: the processes themselves are the parallelism."""
+    torch.set_num_threads(1)
+    cv2.setNumThreads(1)
+
+
+def before_loader_fork() -> None:
+    """Make this process safe to fork loader processes from: OpenCV's thread pool does not survive a fork.
+    Once this process has used the pool (cv2.GaussianBlur, say, in an augmentation chain run here), a
+    forked loader process hangs for ever in worker_init's cv2.setNumThreads. With one OpenCV thread here
+    there is no pool to inherit; the training process itself runs no OpenCV while its loaders read."""
+    cv2.setNumThreads(1)
+
+
+def make_optimizer(
+    model: torch.nn.Module, o: OptimConfig, total_iters: int | Callable[[], int]
+) -> tuple[torch.optim.Optimizer, LambdaLR]:
+    """Ranger (timm's Lookahead over RAdam) and the per-iteration warmup + flat + cosine schedule over
+    `total_iters` steps (a callable: read at every step, for a schedule fitted while it runs)."""
+    optimizer = create_optimizer_v2(
+        model,
+        opt="lookahead_radam",
+        lr=o.lr,
+        weight_decay=o.weight_decay,
+        betas=RANGER_BETAS,
+        eps=o.eps,
+        decoupled_weight_decay=True,  # Ranger decays weights directly (p -= lr * wd * p)
+        filter_bias_and_bn=not o.decay_norms_biases,  # timm's no-decay group: biases and 1-d (norm) weights
+    )
+    total = total_iters if callable(total_iters) else lambda: total_iters
+    return optimizer, LambdaLR(optimizer, lambda it: lr_factor(it, total(), o))
+
+
+@torch.no_grad()
+def centralize_gradients(optimizer: torch.optim.Optimizer) -> None:
+    """Ranger's gradient centralisation (GDR-Net's default `use_gc`): the gradient of every parameter
+    with more than one dimension (conv and FC weights) minus its mean over all but the output dimension."""
+    for group in optimizer.param_groups:
+        for p in group["params"]:
+            if p.grad is not None and p.grad.dim() > 1:
+                p.grad.sub_(p.grad.mean(dim=tuple(range(1, p.grad.dim())), keepdim=True))
+
+
+def _init_distributed() -> tuple[int, int, torch.device]:
+    """(rank, world size, device) from torchrun's environment; a single process without it."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    cuda = torch.cuda.is_available()
+    if world > 1 and not dist.is_initialized():
+        dist.init_process_group("nccl" if cuda else "gloo")
+    rank = dist.get_rank() if world > 1 else 0
+    if cuda:
+        local = int(os.environ.get("LOCAL_RANK", "0"))
+        torch.cuda.set_device(local)
+        return rank, world, torch.device("cuda", local)
+    return rank, world, torch.device("cpu")
+
+
+def memory_format(device: torch.device) -> torch.memory_format:
+    """How training lays out the network's weights and input images: channels-last on a CPU, where
+    oneDNN's NHWC convolutions make the smoke preset's step faster (240 -> 185 ms on 2 threads, batch 8:
+    `python benchmarks/posenet_dataloader.py --data DIR`) and the CPU detector's (603 -> 460 ms:
+    `python benchmarks/detector_step.py --data DIR`); the default elsewhere (unmeasured)."""
+    return torch.channels_last if device.type == "cpu" else torch.contiguous_format
+
+
+def compared_layouts(device: torch.device) -> list[tuple[torch.memory_format, str]]:
+    """Training's memory format, then the default contiguous one where that differs, each with a label:
+    what the speed benchmarks time side by side."""
+    trained = memory_format(device)
+    layouts = [trained] + ([torch.contiguous_format] if trained != torch.contiguous_format else [])
+    return [(f, str(f).removeprefix("torch.") + (" (training's)" if f == trained else "")) for f in layouts]
+
+
+def _to(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch.Tensor]:
+    """The batch on `device`, its input images in the training memory format."""
+    moved = {k: v.to(device, non_blocking=True) for k, v in batch.items()}
+    moved["roi_img"] = moved["roi_img"].contiguous(memory_format=memory_format(device))
+    return moved
+
+
+class RunLog:
+    """Rank 0's step log (JSONL), TensorBoard scalars and progress bar."""
+
+    def __init__(self, out: Path, step: int, total: int | None, every: int) -> None:
+        path = out / LOG_FILE
+        kept = (
+            [ln for ln in path.read_text().splitlines() if json.loads(ln)["step"] <= step]
+            if path.exists()
+            else []
+        )
+        atomic_write_text(path, "".join(ln + "\n" for ln in kept))
+        self.file = path.open("a")
+        self.tb = SummaryWriter(str(out / "tb"))
+        self.bar = tqdm(total=total, initial=step, desc="train", unit="step", dynamic_ncols=True)
+        self.every = every
+
+    def step(self, row: dict[str, Any]) -> None:
+        self.file.write(json.dumps(row) + "\n")
+        self.file.flush()
+        self.bar.update(1)
+        self.bar.set_postfix(loss=f"{row['loss']:.4f}", epoch=row["epoch"])
+        if row["step"] % self.every == 0:
+            for key, value in row.items():
+                if key not in ("step", "epoch"):
+                    self.tb.add_scalar(
+                        key if key in ("lr", "loss", "step_s", "images") else f"loss/{key}",
+                        value,
+                        row["step"],
+                    )
+
+    def close(self) -> None:
+        self.file.close()
+        self.tb.close()
+        self.bar.close()
+
+
+def pm_loss_points(obj: ObjectModel, device: torch.device) -> PmObject:
+    """The point-matching loss's view of the object on `device`: its model points scaled by its largest
+    extent, and its symmetries."""
+    return PmObject(
+        points=torch.from_numpy(obj.pm_points / obj.extent.max()).float().to(device),
+        symmetries=torch.from_numpy(obj.symmetries).float().to(device),
+    )
+
+
+def train_step(
+    model: torch.nn.Module,
+    optimizer: torch.optim.Optimizer,
+    batch: dict[str, torch.Tensor],
+    pm: PmObject,
+    cfg: TrainConfig,
+    precision: Precision | None = None,
+) -> torch.Tensor:
+    """One optimisation step in `precision` (default float32); returns the detached float32 (total, *terms)
+    losses. fp16 scales the loss (GradScaler); gradient centralisation sees the unscaled gradients."""
+    precision = precision or Precision("off", batch["roi_img"].device)
+    with precision.autocast():
+        out = model(batch["roi_img"], batch["roi_coord2d"])
+        loss, terms = pose_losses(out, batch, pm, cfg.loss)
+    optimizer.zero_grad(set_to_none=True)
+    precision.scaler.scale(loss).backward()
+    if cfg.optim.grad_centralization:
+        precision.scaler.unscale_(optimizer)
+        centralize_gradients(optimizer)
+    precision.scaler.step(optimizer)
+    precision.scaler.update()
+    return torch.stack([loss.detach(), *(terms[k].detach() for k in LOSS_TERMS)]).float()
+
+
+def train(
+    data: Path,
+    out: Path,
+    cfg: TrainConfig,
+    resume: bool = False,
+    max_steps: int | None = None,
+    minutes: float | None = None,
+) -> Path:
+    """Train on `data`'s train split into `out`; returns the path of the last checkpoint. With `minutes`,
+    the schedule is fitted to end when that much wall time has passed since this call (posenet.budget)."""
+    if minutes is not None and (resume or max_steps is not None):
+        raise PosenetError("--minutes fits a new run's whole schedule: it takes no --resume or --max-steps")
+    budget = TimeBudget(60 * minutes, cfg.optim.anneal_point) if minutes is not None else None
+    rank, world, device = _init_distributed()
+    created = not out.exists()
+    try:
+        run = _set_up(data, out, cfg, resume, max_steps, rank, world, device, budget)
+        # a time budget's length is known once fitted
+        log = _open_run_folder(out, cfg, run.step, None if budget else run.stop) if rank == 0 else None
+        try:
+            _loop(run, out / LAST if rank == 0 else None, log)
+        finally:
+            if log is not None:
+                log.close()
+        return out / LAST
+    except PosenetError:
+        # a sample that cannot be read: a run folder this call made holds nothing to resume, so it goes
+        if rank == 0 and created and not (out / LAST).exists():
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    finally:
+        if world > 1:
+            dist.destroy_process_group()
+
+
+@dataclass
+class _Run:
+    """One process's training run: what the loop advances and the checkpoint saves."""
+
+    cfg: TrainConfig
+    model: PoseNet
+    net: torch.nn.Module  # the model, or its DDP wrapper: what the steps call
+    optimizer: torch.optim.Optimizer
+    scheduler: LambdaLR
+    dataset: PoseDataset
+    sampler: EpochSampler
+    loader: DataLoader
+    pm: PmObject
+    device: torch.device
+    precision: Precision
+    world: int
+    step: int  # optimisation steps done
+    stop: int  # the step this invocation stops at
+    budget: TimeBudget | None = None  # --minutes: the schedule's total, fitted while the run goes
+    weight_spread: float = 0.0  # largest weight difference between DDP processes, measured at the stop
+
+
+def _set_up(
+    data: Path,
+    out: Path,
+    cfg: TrainConfig,
+    resume: bool,
+    max_steps: int | None,
+    rank: int,
+    world: int,
+    device: torch.device,
+    budget: TimeBudget | None = None,
+) -> _Run:
+    """Refuse a bad request, then open the data and build the seeded model, optimizer and loader
+    (resumed from OUT/last.pt with `resume`); nothing is written. With a `budget`, the schedule's total
+    is the budget's, refitted as the run goes."""
+    o = cfg.optim
+    _refuse(out, o.batch_size, resume, world)
+    dataset = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
+    state = load_checkpoint(out / LAST) if resume else None
+    # a resumed run keeps the schedule it started with (a time budget's fitted one included)
+    total = (state or {}).get("schedule_steps") or o.epochs * steps_per_epoch(len(dataset), o, world)
+    sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
+    stop = (
+        budget.total if budget else stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, rank == 0)
+    )
+    model, optimizer, scheduler = _build(cfg, (lambda: budget.total) if budget else total, device)
+    precision = Precision(o.amp, device)
+    step = (
+        _restore(state, out / LAST, model, optimizer, scheduler, precision, cfg.data.obj_id) if state else 0
+    )
+    if rank == 0:
+        tqdm.write(f"precision: {precision.label} (optim.amp {o.amp})")
+    return _Run(
+        cfg=cfg,
+        model=model,
+        net=DistributedDataParallel(model) if world > 1 else model,
+        optimizer=optimizer,
+        scheduler=scheduler,
+        dataset=dataset,
+        sampler=sampler,
+        pm=pm_loss_points(dataset.obj, device),
+        loader=_loader(dataset, sampler, cfg.data.workers, device),
+        device=device,
+        precision=precision,
+        world=world,
+        step=step,
+        stop=stop,
+        budget=budget,
+    )
+
+
+def _refuse(out: Path, batch_size: int, resume: bool, world: int) -> None:
+    """A global batch that does not split over the processes, or a new run over an existing one."""
+    if batch_size % world:
+        raise PosenetError(f"batch size {batch_size} does not split over {world} processes")
+    if not resume and (out / LAST).exists():
+        raise PosenetError(f"{out} already holds a run ({LAST}); pass --resume or choose another --out")
+
+
+def _loader(dataset: PoseDataset, sampler: EpochSampler, workers: int, device: torch.device) -> DataLoader:
+    """Batches in the sampler's order; `workers` persistent single-threaded processes."""
+    if workers > 0:
+        before_loader_fork()
+    return DataLoader(
+        dataset,
+        batch_size=sampler.batch_size,
+        sampler=sampler,
+        num_workers=workers,
+        persistent_workers=workers > 0,
+        pin_memory=device.type == "cuda",
+        worker_init_fn=worker_init,
+    )
+
+
+def stop_step(total: int, max_steps: int | None, epochs: int, per_epoch: int, announce: bool) -> int:
+    """The step to stop at: the schedule's end, or --max-steps before it (a cap past it is announced)."""
+    if max_steps is None:
+        return total
+    if announce and max_steps > total:
+        tqdm.write(
+            f"note: --max-steps {max_steps} exceeds the schedule's {total} steps "
+            f"({epochs} epochs x {per_epoch}); training stops at step {total}. "
+            "Raise --epochs to train longer."
+        )
+    return min(total, max_steps)
+
+
+def _build(
+    cfg: TrainConfig, total: int | Callable[[], int], device: torch.device
+) -> tuple[PoseNet, torch.optim.Optimizer, LambdaLR]:
+    """The network from the run's seed (threads pinned on CPU: reproducible losses), its optimizer and
+    the schedule over `total` steps."""
+    if device.type == "cpu":
+        pin_cpu_threads(cfg.optim.threads)
+    torch.manual_seed(cfg.optim.seed)
+    model = create_model(cfg.variant, cfg.preset, **cfg.model).to(device, memory_format=memory_format(device))
+    optimizer, scheduler = make_optimizer(model, cfg.optim, total)
+    return model, optimizer, scheduler
+
+
+def _restore(
+    state: dict[str, Any],
+    path: Path,
+    model: PoseNet,
+    optimizer: torch.optim.Optimizer,
+    scheduler: LambdaLR,
+    precision: Precision,
+    obj_id: int,
+) -> int:
+    """Load checkpoint `state` (read from `path`) of the same network configuration and object into the
+    run; returns its step."""
+    check_model_config(state, model.config_dict(), path)
+    trained = config_from_dict(state["config"]).data.obj_id
+    if trained != obj_id:
+        raise PosenetError(f"{path} trains object {trained}, not object {obj_id} (--obj-id)")
+    model.load_state_dict(state["model"])
+    optimizer.load_state_dict(state["optimizer"])
+    scheduler.load_state_dict(state["scheduler"])
+    if state.get("grad_scaler"):  # an fp16 run's loss scale
+        precision.scaler.load_state_dict(state["grad_scaler"])
+    return int(state["step"])
+
+
+def _checkpoint(run: _Run) -> dict[str, Any]:
+    """What OUT/last.pt holds: weights, optimizer and schedule state, step, both configs, object size."""
+    return {
+        "model": run.model.state_dict(),
+        "optimizer": run.optimizer.state_dict(),
+        "scheduler": run.scheduler.state_dict(),
+        "step": run.step,
+        "schedule_steps": run.budget.total if run.budget else None,  # a time budget's fitted schedule
+        "model_config": run.model.config_dict(),
+        "config": run.cfg.to_dict(),
+        "world_size": run.world,
+        "rank_weight_spread": run.weight_spread,
+        "amp": run.precision.mode,
+        "grad_scaler": run.precision.scaler.state_dict(),
+        "object": {"extent": run.dataset.obj.extent.tolist(), "diameter": run.dataset.obj.diameter},
+    }
+
+
+def _open_run_folder(out: Path, cfg: TrainConfig, step: int, stop: int | None) -> RunLog:
+    """Rank 0: create OUT, write the resolved config.yaml and open the step log from `step`."""
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "config.yaml", cfg.to_yaml())
+    return RunLog(out, step, stop, cfg.optim.log_every)
+
+
+def _loop(run: _Run, ckpt: Path | None, log: RunLog | None) -> None:
+    """Epochs until the stop step; with `ckpt` (rank 0), save it every ckpt_every epochs and at the stop."""
+    run.model.train()
+    while run.step < run.stop:
+        epoch, skip = divmod(run.step, run.sampler.steps_per_epoch)
+        run.sampler.set_epoch(epoch, skip)
+        _train_epoch(run, epoch, log)
+        if run.step >= run.stop and run.world > 1:  # every process, before rank 0 saves
+            run.weight_spread = rank_weight_spread(run.model)
+            if ckpt is not None:
+                tqdm.write(f"DDP: {run.world} processes, largest weight difference: {run.weight_spread:.1e}")
+        if ckpt is not None and (run.step >= run.stop or (epoch + 1) % run.cfg.optim.ckpt_every == 0):
+            save_checkpoint(ckpt, _checkpoint(run))
+
+
+def _follow_budget(run: _Run, log: RunLog | None) -> None:
+    """Refit the schedule to the time budget after a step and stop at its end; under DDP every process
+    takes rank 0's total and stop, so all keep one schedule."""
+    budget, now = run.budget, time.perf_counter()
+    assert budget is not None
+    froze = budget.update(run.step, now)
+    stop = run.step if budget.expired(now) and run.step < budget.total else budget.total
+    if run.world > 1:
+        shared = torch.tensor([budget.total, stop], dtype=torch.int64, device=run.device)
+        dist.broadcast(shared, 0)
+        budget.total, stop = (int(v) for v in shared.tolist())
+    run.stop = stop
+    if log is None:
+        return
+    if budget.fitted:
+        log.bar.total = run.stop
+    if froze:
+        step_s = (now - budget.start) / run.step
+        tqdm.write(
+            f"time budget {budget.seconds / 60:g} min: schedule fitted to {budget.total} steps, cosine "
+            f"from step {run.step} ({step_s:.3f} s per step so far, start-up included)"
+        )
+    elif stop < budget.total:
+        fit = (
+            f"of the fitted {budget.total}"
+            if budget.fitted
+            else f"before the fit (after {PROBE_STEPS} steps)"
+        )
+        tqdm.write(f"time budget spent at step {run.step} {fit}: stopping")
+
+
+def rank_weight_spread(model: torch.nn.Module) -> float:
+    """The largest difference of any weight between the DDP processes: 0 while DDP keeps them in sync
+    (same initial weights, all-reduced gradients, the same optimiser steps)."""
+    flat = torch.cat([p.detach().float().flatten() for p in model.parameters()])
+    high, low = flat.clone(), flat.clone()
+    dist.all_reduce(high, op=dist.ReduceOp.MAX)
+    dist.all_reduce(low, op=dist.ReduceOp.MIN)
+    return float((high - low).max())
+
+
+def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
+    """The sampler's batches of `epoch` up to the stop step: one step each, losses averaged over the
+    processes and logged with the images the step took over all processes (the global batch)."""
+    tic = time.perf_counter()
+    for batch in run.loader:
+        scale = run.precision.loss_scale()
+        values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm, run.cfg, run.precision)
+        lr = run.optimizer.param_groups[0]["lr"]
+        if run.precision.loss_scale() >= scale:
+            # the schedule follows the optimizer's updates: fp16's scaler skips the first ones while it
+            # finds its scale (2^16 -> 2^8 on the amp test config), and the warmup starts at the first update
+            run.scheduler.step()
+        run.step += 1
+        if run.budget is not None:
+            _follow_budget(run, log)
+        images = torch.tensor([float(len(batch["roi_img"]))], device=values.device)
+        if run.world > 1:
+            dist.all_reduce(values)
+            dist.all_reduce(images)
+            values /= run.world
+        if log is not None:
+            toc = time.perf_counter()
+            losses = dict(zip(("loss", *LOSS_TERMS), values.tolist(), strict=True)) | {"images": int(images)}
+            log.step({"step": run.step, "epoch": epoch, "lr": lr, "step_s": toc - tic, **losses})
+            tic = toc
+        if run.step >= run.stop:
+            break

@@ -1,0 +1,394 @@
+"""The `scgen` command line: parses options and calls the library; errors are one line, exit non-zero."""
+
+from __future__ import annotations
+
+import functools
+import os
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import click
+
+from scgen.errors import ScgenError
+from scgen.scenes.factors import FACTOR_GROUPS
+
+
+def one_line_errors(*errors: type[Exception]) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Decorator for click commands: `errors` become click's one-line 'Error: ...' and exit status 1.
+
+    Shared by the scgen and posenet command lines (each passes its own input-error type).
+    """
+
+    def decorate(fn: Callable[..., Any]) -> Callable[..., Any]:
+        @functools.wraps(fn)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return fn(*args, **kwargs)
+            except errors as exc:
+                raise click.ClickException(str(exc)) from None
+
+        return wrapper
+
+    return decorate
+
+
+def parse_resolution(text: str | None) -> tuple[int, int] | None:
+    if text is None:
+        return None
+    m = re.fullmatch(r"(\d+)[xX](\d+)", text.strip())
+    if not m or int(m.group(1)) <= 0 or int(m.group(2)) <= 0:
+        raise ScgenError(f"--resolution must be WxH with positive integers, got '{text}'")
+    return int(m.group(1)), int(m.group(2))
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    m = re.fullmatch(r"(\d+)/(\d+)", text.strip())
+    if not m:
+        raise ScgenError(f"--shard must be i/N (e.g. 0/4), got '{text}'")
+    return int(m.group(1)), int(m.group(2))
+
+
+def scene_options(command: Callable[..., Any]) -> Callable[..., Any]:
+    """The options render and preview share: which renderer, seed, target mesh and sampling config."""
+    options = [
+        click.option("--backend", default="blender", show_default=True,
+                     help="Renderer: blender (Cycles) or mitsuba."),
+        click.option("--seed", type=int, default=0, show_default=True,
+                     help="Dataset seed: sample i of seed s never changes."),
+        click.option("--model", "model_path", type=click.Path(path_type=Path), default=None,
+                     help="Target mesh (OBJ/PLY/GLB/STL); default: the bundled spacecraft."),
+        click.option("--keep-scale", is_flag=True,
+                     help="Keep the mesh's own scale (metres) instead of a 0.2 m diameter."),
+        click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,
+                     help="TOML/YAML file overriding any sampling distribution (see docs/config.md)."),
+        click.option("--camera", "camera", default=None,
+                     help="Camera preset: ideal | default | speedplus (default: the config's camera.preset, "
+                          "else default). The config's camera table overrides it key by key."),
+    ]  # fmt: skip
+    for option in reversed(options):
+        command = option(command)
+    return command
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="scgen", prog_name="scgen")
+def main() -> None:
+    """scgen: dense-labelled synthetic 6D-pose datasets of one spacecraft (BOP layout + xyz maps)."""
+
+
+@main.command()
+@click.option("--n", "n", type=int, required=True, help="Number of samples (sample ids 0..n-1).")
+@click.option(
+    "--out", type=click.Path(path_type=Path), required=True, help="Dataset folder (created or resumed)."
+)
+@scene_options
+@click.option(
+    "--backgrounds",
+    "backgrounds_dir",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Folder of your own background images: adds the background kind 'user'.",
+)
+@click.option("--resolution", default=None, help="Image size WxH (default 640x480); keeps the field of view.")
+@click.option("--quality", default="default", show_default=True, help="draft | default | high.")
+@click.option("--device", default="auto", show_default=True, help="Blender device: auto | cpu | gpu.")
+@click.option(
+    "--split-by",
+    type=click.Choice(["factors", "random"]),
+    default="factors",
+    show_default=True,
+    help="Split whole factor combinations (test configurations unseen in training) or images.",
+)
+@click.option(
+    "--split", "split_text", default="0.7,0.1,0.2", show_default=True, help="train,val,test ratios."
+)
+@click.option("--shard", "shard_text", default="0/1", show_default=True, help="Render only shard i of N.")
+@click.option(
+    "--workers",
+    type=int,
+    default=None,
+    help="Worker processes/actors (default: CPU cores). Blender's workers share the cores; Mitsuba's "
+    "render on one thread each, so that its images are the same whatever the count.",
+)
+@click.option(
+    "--executor",
+    type=click.Choice(["local", "ray"]),
+    default="local",
+    show_default=True,
+    help="local processes, or Ray actors on a cluster (pip install 'scgen[ray]').",
+)
+@click.option("--ray-address", default=None, help="Ray cluster address (default: start a local Ray).")
+@click.option("--rgb-format", type=click.Choice(["png", "jpg"]), default="png", show_default=True)
+@click.option("--xyz-dtype", type=click.Choice(["float16", "float32"]), default="float16", show_default=True)
+@click.option(
+    "--depth/--no-depth",
+    "--save-depth",
+    "save_depth",
+    default=True,
+    show_default=True,
+    help="Write BOP uint16 depth maps (bop_toolkit's calc_gt_info and VSD read them). "
+    "--save-depth, the old opt-in, is kept as an alias of --depth.",
+)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@one_line_errors(ScgenError)
+def render(
+    n,
+    out,
+    backend,
+    seed,
+    model_path,
+    keep_scale,
+    config_path,
+    camera,
+    backgrounds_dir,
+    resolution,
+    quality,
+    device,
+    split_by,
+    split_text,
+    shard_text,
+    workers,
+    executor,
+    ray_address,
+    rgb_format,
+    xyz_dtype,
+    save_depth,
+    quiet,
+) -> None:
+    """Render a dataset: RGB, masks, xyz maps, BOP JSON, metadata.csv and splits.json."""
+    from scgen.dataset.splits import parse_ratios
+    from scgen.dataset.writer import WriteOptions
+    from scgen.run.runner import RenderJob, run_render
+
+    res = parse_resolution(resolution)
+    overrides = {"background": {"user_dir": str(backgrounds_dir)}} if backgrounds_dir else {}
+    job = RenderJob(
+        out=out, n=n, seed=seed, backend=backend, quality=quality, device=device, model_path=model_path,
+        keep_scale=keep_scale, config_path=config_path, camera=camera, resolution=res,
+        overrides=overrides, split_by=split_by,
+        ratios=parse_ratios(split_text), shard=parse_shard(shard_text),
+        workers=workers or os.cpu_count() or 1, executor=executor, ray_address=ray_address,
+        write=WriteOptions(rgb_format=rgb_format, xyz_dtype=xyz_dtype, save_depth=save_depth),
+    )  # fmt: skip
+    summary = run_render(job, progress=not quiet)
+    rate = summary["rendered"] / summary["total_s"] if summary["total_s"] > 0 else 0.0
+    click.echo(
+        f"{out}: rendered {summary['rendered']} (skipped {summary['skipped']} already complete), "
+        f"{summary['complete']}/{n} on disk, {rate:.2f} img/s; "
+        + ", ".join(f"{k} {v}" for k, v in summary["splits"].items())
+    )
+
+
+@main.command()
+@click.argument("bop_dir", type=click.Path(path_type=Path))
+@click.option("--split", default=None, help="Only this split folder (e.g. test); default: every split.")
+@click.option("--workers", type=int, default=None, help="Worker processes (default: CPU cores).")
+@click.option("--overwrite", is_flag=True, help="Replace the dataset's own masks and scene_gt_info.json.")
+@click.option("--xyz-dtype", type=click.Choice(["float16", "float32"]), default="float16", show_default=True)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@one_line_errors(ScgenError)
+def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: bool, xyz_dtype: str,
+             quiet: bool) -> None:  # fmt: skip
+    """Label any BOP dataset: xyz maps of every scene_gt instance, masks and scene_gt_info where missing."""
+    from scgen.run.bop_annotate import AnnotateJob, AnnotateOptions, disagreement_line, run_annotate
+
+    job = AnnotateJob(bop_dir, split, workers or os.cpu_count() or 1, AnnotateOptions(xyz_dtype, overwrite))
+    s = run_annotate(job, progress=not quiet)
+    rate = s["instances"] / s["total_s"] if s["total_s"] > 0 else 0.0
+    click.echo(
+        f"{bop_dir}: annotated {s['annotated']} images ({s['instances']} instances, {rate:.1f} instances/s), "
+        f"skipped {s['skipped']} already complete; scene_gt_info.json of {s['scenes']} scene(s) written"
+    )
+    click.echo(disagreement_line(s["disagreement"]))
+
+
+@main.command()
+@click.argument("dataset", type=click.Path(path_type=Path))
+@click.option(
+    "--workers", type=int, default=None, help="Processes checking scene folders (default: CPU cores)."
+)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@one_line_errors(ScgenError)
+def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
+    """Re-check a dataset's invariants (files, masks, boxes, xyz reprojection) and print a verdict."""
+    from scgen.dataset.validate import validate_dataset
+
+    if workers is not None and workers <= 0:
+        raise ScgenError(f"--workers must be positive, got {workers}")
+    problems, n = validate_dataset(dataset, progress=not quiet, workers=workers or os.cpu_count() or 1)
+    if problems:
+        for p in problems[:50]:
+            click.echo(f"FAIL {p}")
+        raise click.ClickException(f"{dataset}: {len(problems)} problem(s) in {n} samples")
+    click.echo(f"OK {dataset}: {n} samples pass every check")
+
+
+@main.command(help=f"Group counts of the robustness factors: {', '.join(FACTOR_GROUPS)}.")
+@click.argument("dataset", type=click.Path(path_type=Path))
+@click.option("--split", default=None, help="Only this split (train | val | test); default: every split.")
+@click.option(
+    "--json", "json_path", type=click.Path(path_type=Path), default=None, help="Write the stats as JSON."
+)
+@click.option(
+    "--csv", "csv_path", type=click.Path(path_type=Path), default=None, help="Write the stats as CSV."
+)
+@click.option(
+    "--plots",
+    "plots_dir",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Write pose-coverage and distance histograms (PNG) here.",
+)
+@click.option(
+    "--min-group",
+    type=int,
+    default=500,
+    show_default=True,
+    help="Eligibility minimum per group (the paper's rule).",
+)
+@click.option(
+    "--sample-groups",
+    type=int,
+    default=None,
+    help="Write, per group, N sample ids for group-wise evaluation (of --split, default test).",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of --sample-groups.")
+@click.option(
+    "--groups-out",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Where --sample-groups writes (default DATASET/groups_SPLIT_nN_sS.json).",
+)
+@one_line_errors(ScgenError)
+def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_groups, seed, groups_out) -> None:
+    """Group counts of the robustness factors (the help lists scgen.scenes.factors.FACTOR_GROUPS)."""
+    import json
+
+    from scgen.dataset.atomic import atomic_write_text
+    from scgen.dataset.stats import compute_stats, format_table, to_csv, write_plots
+    from scgen.dataset.stats import sample_groups as draw_groups
+
+    result = compute_stats(dataset, split, min_group)
+    click.echo(format_table(result))
+    if json_path:
+        atomic_write_text(json_path, json.dumps(result, indent=1) + "\n")
+    if csv_path:
+        atomic_write_text(csv_path, to_csv(result))
+    if plots_dir:
+        for p in write_plots(dataset, split, plots_dir):
+            click.echo(f"wrote {p}")
+    if sample_groups is not None:
+        if sample_groups <= 0:
+            raise ScgenError(f"--sample-groups must be positive, got {sample_groups}")
+        which = split or "test"
+        groups = draw_groups(dataset, which, sample_groups, seed)
+        path = groups_out or Path(dataset) / f"groups_{which}_n{sample_groups}_s{seed}.json"
+        atomic_write_text(path, json.dumps(groups, indent=1) + "\n")
+        click.echo(f"wrote {path}")
+
+
+@main.command()
+@click.argument("out", type=click.Path(path_type=Path))
+@click.argument("shards", nargs=-1, required=True, type=click.Path(path_type=Path))
+@one_line_errors(ScgenError)
+def merge(out: Path, shards: tuple[Path, ...]) -> None:
+    """Join shard outputs (same seed, config and model) into OUT, as if rendered in one run."""
+    from scgen.dataset.merge import merge_shards
+
+    n, total = merge_shards(out, list(shards))
+    click.echo(f"{out}: {n}/{total} samples after merging {len(shards)} shard folder(s)")
+
+
+@main.command()
+@click.argument("dataset", type=click.Path(path_type=Path))
+@click.option(
+    "--format",
+    "fmt",
+    required=True,
+    metavar="speedplus|coco",
+    help="speedplus: SPEED+'s camera.json, images and train/validation/test labels; "
+    "coco: one COCO instances file per split (masks as RLE, factors per image).",
+)
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="Folder to write (created; must be empty unless --overwrite).",
+)
+@click.option("--overwrite", is_flag=True, help="Replace a non-empty OUT.")
+@click.option(
+    "--images",
+    default=None,
+    metavar="copy|hardlink|symlink",
+    help="speedplus only: how the images get into OUT (default copy).",
+)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@one_line_errors(ScgenError)
+def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | None, quiet: bool) -> None:
+    """Export a dataset to SPEED+ or COCO, keeping its train/val/test split (docs/dataset.md).
+
+    \b
+    speedplus: OUT/camera.json, OUT/synthetic/images/, OUT/synthetic/{train,validation,test}.json
+    coco:      OUT/instances_{train,val,test}.json (file_name relative to DATASET)
+
+    Every image is decoded first: nothing is written when DATASET (one of its files unreadable), --format
+    or OUT is refused; OUT appears only once complete.
+    """
+    from scgen.dataset.export import export_dataset
+
+    counts = export_dataset(dataset, fmt, out, overwrite, images, progress=not quiet)
+    click.echo(f"{out}: {fmt} export of {dataset}, " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+
+
+@main.command()
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for preview.png.")
+@click.option("--n", "n", type=int, default=16, show_default=True, help="Number of samples (ids 0..n-1).")
+@scene_options
+@click.option("--resolution", default="320x240", show_default=True, help="Image size WxH.")
+@click.option("--quality", default="draft", show_default=True, help="draft | default | high.")
+@one_line_errors(ScgenError)
+def preview(out, n, backend, seed, model_path, keep_scale, config_path, camera, resolution, quality) -> None:
+    """Render n samples in memory, as render would, and write OUT/preview.png: RGB, masks, xyz, factors."""
+    from scgen.generator import Generator
+    from scgen.preview import build_preview, save_png
+
+    if n <= 0:
+        raise ScgenError(f"--n must be a positive number of samples, got {n}")
+    generator = Generator.load(
+        model_path,
+        config_path,
+        seed,
+        parse_resolution(resolution),
+        keep_scale,
+        camera=camera,
+        backend=backend,
+        quality=quality,
+    )
+    path = Path(out) / "preview.png"
+    save_png(build_preview(generator, n), path)
+    click.echo(f"wrote {path} ({n} samples, {backend})")
+
+
+@main.command()
+@click.option("--out", type=click.Path(path_type=Path), default=None, help="Also check its free space.")
+@one_line_errors(ScgenError)
+def doctor(out: Path | None) -> None:
+    """Check what this machine can render and train with: one line per check, its verdict and the fix.
+
+    Exits non-zero when the default backend (blender) is installed but cannot render; a node installed
+    without it (a training node, a Mitsuba-only node) gets `warn` lines naming what to install.
+    """
+    from scgen.doctor import FAIL, diagnose
+
+    failed = False
+    for finding in diagnose(out):
+        click.echo(str(finding))
+        failed |= finding.verdict == FAIL
+    if failed:
+        raise ScgenError("the default backend (blender) cannot render here: see the FAIL line(s) above")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,2 @@
+"""The dataset on disk: its layout, the BOP files, the writer, splits, stats, validation, merge and
+exports."""

@@ -1,0 +1,93 @@
+"""COCO instances files, one per split, as detector toolchains read them (pycocotools' encoding).
+
+    OUT/instances_{train,val,test}.json
+
+`file_name` is the image's path relative to the dataset folder (the image root to give a loader). One
+category, the target; one annotation per image whose target is visible: bbox = scene_gt_info's
+bbox_visib in COCO's convention, segmentation = RLE of mask_visib, area = its pixel count, iscrowd 0.
+Each image entry also carries the sample's metadata.csv row as extra fields.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pycocotools import mask as mask_utils
+
+import scgen
+from scgen.dataset import bop
+from scgen.dataset.export.source import Sample, Source
+from scgen.dataset.image_file import why_unreadable
+from scgen.dataset.layout import OBJ_ID, dumps
+from scgen.dataset.splits import SPLITS
+from scgen.errors import ScgenError
+
+IMAGE_FIELDS = ("id", "file_name", "width", "height")  # COCO's own keys of an image entry
+
+
+def instances_file(split: str) -> str:
+    return f"instances_{split}.json"
+
+
+def metadata_value(text: str) -> int | float | str:
+    """A metadata.csv cell as JSON: an int or a finite float where it reads as one, the text otherwise."""
+    for kind in (int, float):
+        try:
+            value = kind(text)
+        except ValueError:
+            continue
+        if math.isfinite(value):
+            return value
+    return text
+
+
+def image_entry(source: Source, sample: Sample) -> dict[str, Any]:
+    extra = {k: metadata_value(v) for k, v in sample.metadata.items()}
+    if clash := set(extra) & set(IMAGE_FIELDS):
+        raise ScgenError(f"metadata.csv column(s) {', '.join(sorted(clash))} clash with COCO's image keys")
+    width, height = source.size
+    return {"id": sample.sample_id, "file_name": source.relative(sample.image), "width": width,
+            "height": height, **extra}  # fmt: skip
+
+
+def rle(mask: np.ndarray) -> dict[str, Any]:
+    """pycocotools' compressed RLE of a bool mask, its counts as text (JSON holds no bytes)."""
+    encoded = mask_utils.encode(np.asfortranarray(mask.astype(np.uint8)))
+    return {"size": [int(n) for n in encoded["size"]], "counts": encoded["counts"].decode("ascii")}
+
+
+def annotation(sample: Sample) -> dict[str, Any]:
+    """The target's annotation; its id is the sample id + 1, as COCOeval takes id 0 for 'no match'."""
+    visib = bop.read_mask(sample.mask_visib)
+    if visib is None:
+        path = sample.mask_visib
+        raise ScgenError(f"sample {sample.sample_id}: cannot read {path}: {why_unreadable(path)}")
+    x, y, w, h = bop.box_pixels(sample.gt_info["bbox_visib"])  # COCO's w, h count pixels: BOP's + 1
+    return {"id": sample.sample_id + 1, "image_id": sample.sample_id, "category_id": OBJ_ID,
+            "bbox": [x, y, w, h], "area": int(sample.gt_info["px_count_visib"]), "segmentation": rle(visib),
+            "iscrowd": 0}  # fmt: skip
+
+
+def instances(source: Source, split: str) -> dict[str, Any]:
+    samples = source.split(split)
+    return {
+        "info": {"description": f"scgen dataset {source.root.resolve()}, split {split}: file_name is "
+                                "relative to that folder", "version": scgen.__version__},
+        "licenses": [],
+        "categories": [{"id": OBJ_ID, "name": source.model_name, "supercategory": "spacecraft"}],
+        "images": [image_entry(source, s) for s in samples],
+        "annotations": [annotation(s) for s in samples if s.gt_info["px_count_visib"] > 0],
+    }  # fmt: skip
+
+
+def write(source: Source, out: Path) -> dict[str, int]:
+    """Write one instances file per split into `out`; returns the number of images per file."""
+    counts = {}
+    for split in SPLITS:
+        content = instances(source, split)
+        (out / instances_file(split)).write_text(dumps(content))
+        counts[instances_file(split)] = len(content["images"])
+    return counts

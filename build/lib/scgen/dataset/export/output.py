@@ -1,0 +1,59 @@
+"""The export's output folder: checked before anything is written, filled beside OUT, renamed at the end."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from scgen.dataset.atomic import TMP_MARK
+from scgen.errors import ScgenError
+
+IMAGE_MODES = ("copy", "hardlink", "symlink")  # how exported images refer to the rendered ones
+
+
+def check_out(root: Path, out: Path, overwrite: bool) -> None:
+    """OUT must lie apart from the dataset folder, and be absent or empty unless `overwrite`."""
+    out_r, root_r = out.resolve(), root.resolve()
+    if out_r == root_r or root_r in out_r.parents or out_r in root_r.parents:
+        raise ScgenError(f"--out {out} overlaps the dataset folder {root}: choose a folder outside it")
+    if out.exists() and not out.is_dir():
+        raise ScgenError(f"--out {out} exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise ScgenError(f"--out {out} exists and is not empty (add --overwrite to replace it)")
+
+
+@contextmanager
+def staged(out: Path) -> Iterator[Path]:
+    """A new folder beside `out` to write into: it replaces `out` when the block succeeds and is removed
+    when it raises, so a failed export leaves `out` as it was."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}{TMP_MARK}{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)  # left by a killed export of the same process id
+    tmp.mkdir()
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    old = out.with_name(f".{out.name}.old{TMP_MARK}{os.getpid()}")
+    shutil.rmtree(old, ignore_errors=True)
+    if out.exists():
+        os.replace(out, old)
+    os.replace(tmp, out)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def place_image(src: Path, dst: Path, mode: str) -> None:
+    """Put a rendered image at `dst`: a copy of its bytes, a hard link or an absolute symbolic link."""
+    try:
+        if mode == "copy":
+            shutil.copyfile(src, dst)
+        elif mode == "hardlink":
+            os.link(src, dst)
+        else:
+            dst.symlink_to(src.resolve())
+    except OSError as exc:
+        raise ScgenError(f"cannot {mode} {src} to {dst} ({exc.strerror}); try --images copy") from exc

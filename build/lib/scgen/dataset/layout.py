@@ -1,0 +1,134 @@
+"""The on-disk dataset layout (docs/dataset.md): paths, manifest, records and the metadata table."""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections import defaultdict
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from scgen.dataset import bop
+from scgen.dataset.bop import read_json
+from scgen.errors import ScgenError
+
+MANIFEST = "scgen.json"
+# 2: depth by default, scene_gt_info in bop_toolkit's conventions, models_eval/, test targets
+FORMAT = "scgen-bop/2"
+CHUNK = 1000  # samples per BOP scene folder: scene_id = sample_id // CHUNK; im_id = sample_id
+OBJ_ID = 1  # the target's BOP object id
+TARGET_INSTANCE = 0  # the target is the only annotated instance of each image
+
+
+class Layout:
+    """Paths of one dataset's files; sample ids double as BOP im_ids."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+
+    def chunk_dir(self, split: str, sample_id: int) -> Path:
+        return bop.scene_dir(self.root, split, sample_id // CHUNK)
+
+    def rgb(self, split: str, sample_id: int, ext: str = "png") -> Path:
+        return bop.rgb_path(self.chunk_dir(split, sample_id), sample_id, ext)
+
+    def mask(self, split: str, sample_id: int, visib: bool = False) -> Path:
+        return bop.mask_path(self.chunk_dir(split, sample_id), sample_id, TARGET_INSTANCE, visib)
+
+    def xyz(self, split: str, sample_id: int) -> Path:
+        return bop.xyz_path(self.chunk_dir(split, sample_id), sample_id, TARGET_INSTANCE)
+
+    def depth(self, split: str, sample_id: int) -> Path:
+        return bop.depth_path(self.chunk_dir(split, sample_id), sample_id)
+
+    @property
+    def camera_path(self) -> Path:
+        return self.root / bop.CAMERA_FILE
+
+    @property
+    def models_dir(self) -> Path:
+        return self.root / bop.MODELS_DIR
+
+    @property
+    def models_eval_dir(self) -> Path:
+        return self.root / bop.MODELS_EVAL_DIR
+
+    def test_targets(self, kind: str) -> Path:
+        """test_targets_{kind}.json, kind bop19 or bop24 (bop.TEST_TARGETS_FILES)."""
+        return self.root / bop.TEST_TARGETS_FILES[kind]
+
+    def record(self, split: str, sample_id: int) -> Path:
+        return self.chunk_dir(split, sample_id) / "records" / f"{sample_id:06d}.json"
+
+    @property
+    def manifest_path(self) -> Path:
+        return self.root / MANIFEST
+
+    @property
+    def metadata_path(self) -> Path:
+        return self.root / "metadata.csv"
+
+    @property
+    def splits_path(self) -> Path:
+        return self.root / "splits.json"
+
+    def record_paths(self) -> Iterator[Path]:
+        yield from sorted(self.root.glob("*/[0-9]*/records/[0-9]*.json"))
+
+
+DATASET_FILES = "dataset files"  # bytes_by_kind's kind of the root's files, models/ and models_eval/
+
+
+def bytes_by_kind(root: str | Path) -> dict[str, int]:
+    """Bytes on disk under a dataset folder by kind: each per-sample folder of the chunks (rgb, mask,
+    mask_visib, xyz, depth, records, ...), the chunks' own BOP JSON files ("scene json"), and the files
+    of the dataset as a whole (DATASET_FILES: at the root, models/, models_eval/)."""
+    root = Path(root)
+    kinds: dict[str, int] = defaultdict(int)
+    for path in root.rglob("*"):
+        if path.is_file():
+            parts = path.relative_to(root).parts  # split / chunk / folder / file for a sample's file
+            kind = parts[2] if len(parts) == 4 else "scene json" if len(parts) == 3 else DATASET_FILES
+            kinds[kind] += path.stat().st_size
+    return dict(kinds)
+
+
+def dumps(obj: Any) -> str:
+    """Canonical JSON (sorted keys, fixed indent) so identical content gives identical bytes."""
+    return json.dumps(obj, indent=1, sort_keys=True) + "\n"
+
+
+NOT_A_FOLDER = "does not exist or is not a directory"
+
+
+def not_a_dataset(root: str | Path, why: str) -> str:
+    """The one wording of both CLIs (scgen, posenet) for a dataset argument that is not one."""
+    return f"not a dataset folder: {root} {why}"
+
+
+def open_dataset(root: str | Path) -> tuple[Layout, dict[str, Any]]:
+    """The layout and manifest of an existing dataset; a clear error when `root` is not one."""
+    layout = Layout(root)
+    if not layout.root.is_dir():
+        raise ScgenError(not_a_dataset(root, NOT_A_FOLDER))
+    if not layout.manifest_path.is_file():
+        raise ScgenError(not_a_dataset(root, f"has no {MANIFEST} (make one with `scgen render`)"))
+    manifest = read_json(layout.manifest_path)
+    if manifest.get("format") != FORMAT:
+        raise ScgenError(
+            f"unsupported dataset format {manifest.get('format')!r} in {layout.manifest_path} "
+            f"(this scgen reads and writes {FORMAT!r}; render the dataset again)"
+        )
+    return layout, manifest
+
+
+def read_metadata(root: str | Path) -> list[dict[str, str]]:
+    """Rows of metadata.csv (strings; callers convert the columns they use)."""
+    layout, _ = open_dataset(root)
+    if not layout.metadata_path.is_file():
+        raise ScgenError(
+            f"dataset {root} has no metadata.csv: the render did not finish (re-run it to resume)"
+        )
+    with open(layout.metadata_path, newline="") as f:
+        return list(csv.DictReader(f))

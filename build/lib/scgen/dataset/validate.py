@@ -1,0 +1,368 @@
+"""`scgen validate`: re-check a dataset's invariants from the files alone and name every problem."""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from tqdm import tqdm
+
+from scgen.annotate.annotate import full_projection
+from scgen.dataset import bop
+from scgen.dataset.bop import read_json
+from scgen.dataset.bop_dataset import BopDataset, BopImage, is_bop_dataset, open_bop_dataset
+from scgen.dataset.exr import read_xyz_exr
+from scgen.dataset.image_file import read_image, why_unreadable
+from scgen.dataset.layout import OBJ_ID, Layout, open_dataset, read_metadata
+from scgen.dataset.models import EVAL_MAX_EDGE_FRAC
+from scgen.dataset.writer import TargetImage, dataset_target, target_images, target_lists
+from scgen.errors import ScgenError
+from scgen.run.parent_watch import spawn_pool
+from scgen.scenes.spec import CameraSpec
+
+REPROJ_TOL_PX = 0.5
+REPROJ_MIN_SHARE = 0.995
+
+
+def validate_dataset(root: str | Path, progress: bool = True, workers: int = 1) -> tuple[list[str], int]:
+    """(problems, number of samples checked); an empty problem list means the dataset is sound.
+
+    The samples are checked one scene folder at a time, on `workers` processes when more than one.
+    """
+    if not Layout(root).manifest_path.is_file() and is_bop_dataset(Path(root)):
+        return validate_bop_dataset(root, progress)  # a BOP dataset scgen did not render
+    layout, _ = open_dataset(root)
+    problems = check_models(layout)
+    rows = {int(r["sample_id"]) for r in read_metadata(root)}
+    splits = read_json(layout.splits_path)["splits"]
+    split_of = {i: s for s, ids in splits.items() for i in ids}
+    by_scene: dict[Path, list[Path]] = defaultdict(list)
+    for path in layout.record_paths():
+        by_scene[path.parent.parent].append(path)
+    n = sum(len(paths) for paths in by_scene.values())
+    if len(rows) != n:
+        problems.append(f"metadata.csv has {len(rows)} rows but {n} samples are on disk")
+    images: list[TargetImage] = []
+    check = functools.partial(check_scene, layout.root)
+    with (
+        tqdm(total=n, desc="validate", unit="img", disable=not progress) as bar,
+        spawn_pool(workers) if workers > 1 else contextlib.nullcontext() as pool,
+    ):
+        for seen, found, scene_images in (pool.map if pool else map)(check, list(by_scene.values())):
+            for sid, split in seen:
+                if split_of.get(sid) != split:
+                    problems.append(
+                        f"sample {sid}: in folder '{split}' but splits.json says '{split_of.get(sid)}'"
+                    )
+                if sid not in rows:
+                    problems.append(f"sample {sid}: missing from metadata.csv")
+            problems += found
+            images += scene_images
+            bar.update(len(seen))
+    problems += check_test_targets(layout, sorted(images, key=lambda image: image[1]))
+    return problems, n
+
+
+def check_scene(
+    root: Path, records: list[Path]
+) -> tuple[list[tuple[int, str]], list[str], list[TargetImage]]:
+    """Check the samples of one scene folder (their record files): ((sample id, split) of each record,
+    problems, the test images among them)."""
+    layout, manifest = open_dataset(root)
+    target = dataset_target(layout)
+    lo, size = bop.model_box_m(bop.read_models_info(layout.root)[str(OBJ_ID)])
+    scene_files, problems = read_scene_files(records[0].parent.parent)
+    seen, images = [], []
+    for path in records:
+        rec = read_json(path)
+        sid, split = rec["sample_id"], rec["split"]
+        seen.append((sid, split))
+        if split == bop.TEST_SPLIT:
+            images += target_images([rec])
+        bop_problems = check_bop_entries(scene_files, rec)
+        problems += [f"sample {sid}: {p}" for p in bop_problems]
+        if not bop_problems:
+            found = check_sample(layout, manifest, rec, lo, lo + size, target)
+            problems += [f"sample {sid}: {p}" for p in found]
+    return seen, problems, images
+
+
+def check_models(layout: Layout) -> list[str]:
+    """models/ and models_eval/: PLYs with every vertex property bop_toolkit's load_ply reads, one
+    models_info, and an eval model with no edge over EVAL_MAX_EDGE_FRAC diameters (its vertices are the
+    point set of the toolkit's error functions)."""
+    out = []
+    for folder in (bop.MODELS_DIR, bop.MODELS_EVAL_DIR):
+        ply = layout.root / folder / bop.model_file(OBJ_ID)
+        if not ply.is_file():
+            out.append(f"{folder}/{ply.name} missing")
+            continue
+        missing = [p for p in bop.PLY_VERTEX_PROPERTIES if p not in bop.ply_vertex_properties(ply)]
+        if missing:
+            out.append(f"{folder}/{ply.name} has no vertex {', '.join(missing)}")
+    if out:
+        return out
+    info = bop.read_models_info(layout.root)
+    if read_json(layout.models_eval_dir / bop.MODELS_INFO_FILE) != info:
+        out.append(f"{bop.MODELS_EVAL_DIR}/{bop.MODELS_INFO_FILE} differs from {bop.MODELS_DIR}/'s")
+    longest = bop.read_model_mesh(layout.root, OBJ_ID, bop.MODELS_EVAL_DIR).edges_unique_length.max()
+    limit = EVAL_MAX_EDGE_FRAC * info[str(OBJ_ID)]["diameter"] / bop.MM_PER_M
+    if longest > limit * (1 + 1e-6):  # the PLY holds float32 millimetres
+        out.append(f"{bop.MODELS_EVAL_DIR} has an edge of {longest * bop.MM_PER_M:.2f} mm, over "
+                   f"{EVAL_MAX_EDGE_FRAC:.1%} of the diameter")  # fmt: skip
+    return out
+
+
+def check_test_targets(layout: Layout, images: list[TargetImage]) -> list[str]:
+    """The test target lists at the root must list exactly the test samples on disk (in sample order)."""
+    out = []
+    for kind, expected in target_lists(images).items():
+        path = layout.test_targets(kind)
+        try:
+            found = read_json(path)
+        except ScgenError:
+            out.append(f"{path.name} missing or unreadable")
+            continue
+        if found != expected:
+            out.append(f"{path.name} has {len(found)} targets, the test samples on disk give {len(expected)} "
+                       "(or the same number, different)")  # fmt: skip
+    return out
+
+
+def read_scene_files(scene: Path) -> tuple[dict[str, Any], list[str]]:
+    """({name: content} of a scene folder's readable BOP JSON files, one problem per unreadable file)."""
+    out: dict[str, Any] = {}
+    problems = []
+    for name in bop.SCENE_FILES:
+        try:
+            out[name] = read_json(bop.scene_file(scene, name))
+        except ScgenError as exc:
+            problems.append(str(exc))
+    return out, problems
+
+
+def check_bop_entries(scene_files: dict[str, Any], rec: dict[str, Any]) -> list[str]:
+    """The BOP files (what posenet and bop_toolkit read) must hold exactly the sample's record; an
+    unreadable file is reported once for its scene (read_scene_files), not per sample."""
+    sid = str(rec["sample_id"])
+    return [f"{name}.json entry missing or different from the sample's record"
+            for name, content in scene_files.items() if content.get(sid) != rec[name]]  # fmt: skip
+
+
+def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], lo: np.ndarray,
+                 hi: np.ndarray, target: tuple[np.ndarray, np.ndarray, float]) -> list[str]:  # fmt: skip
+    """Problems of one sample: files, mask inclusion, boxes and counts, xyz reprojection and bounds,
+    depth against xyz. `target`: the dataset's model (vertices in metres, faces) and depth scale."""
+    sid, split = rec["sample_id"], rec["split"]
+    out: list[str] = []
+    rgb_path = layout.rgb(split, sid, manifest["rgb_format"])
+    paths = rgb_path, layout.mask(split, sid), layout.mask(split, sid, visib=True)
+    rgb, mask, visib = read_image(paths[0]), bop.read_mask(paths[1]), bop.read_mask(paths[2])
+    decoded = zip(paths, (rgb, mask, visib), strict=True)
+    if unreadable := [f"cannot read {p}: {why_unreadable(p)}" for p, a in decoded if a is None]:
+        return unreadable
+    if mask.shape != rgb.shape[:2] or visib.shape != rgb.shape[:2]:
+        out.append("mask size differs from the RGB size")
+        return out
+    info = rec["scene_gt_info"][0]
+    if (visib & ~mask).any():
+        out.append(f"mask_visib has {int((visib & ~mask).sum())} pixels outside mask")
+    depth = None
+    if manifest["save_depth"]:
+        depth_path = layout.depth(split, sid)
+        depth = read_image(depth_path)
+        if depth is None:
+            return out + [f"cannot read {depth_path}: {why_unreadable(depth_path)}"]
+        if depth.dtype != np.uint16 or depth.shape != mask.shape:
+            return out + [f"{depth_path} is not uint16 of the image size"]
+    vertices, faces, depth_scale = target
+    if rec["scene_camera"]["depth_scale"] != depth_scale:
+        out.append(f"depth_scale {rec['scene_camera']['depth_scale']} != camera.json's {depth_scale}")
+    R, t = bop.gt_pose(rec["scene_gt"][0])
+    camera = bop.camera_spec(rec["scene_camera"], mask.shape[1], mask.shape[0])
+    whole = full_projection(mask, camera, vertices @ R.T + t, faces)
+    valid = int(mask.sum()) if depth is None else int((mask & (depth > 0)).sum())
+    out += check_gt_info(info, visib, whole, valid)
+    if info["xyz_box"] is None:
+        if visib.any():
+            out.append("visible pixels but no xyz map")
+        return out
+    xyz_path = layout.xyz(split, sid)
+    if not xyz_path.is_file():
+        return out + [f"xyz map missing: {xyz_path}"]
+    try:
+        crop = read_xyz_exr(xyz_path)
+    except Exception as exc:  # OpenEXR raises plain exceptions for corrupt files
+        return out + [f"xyz map unreadable: {exc}"]
+    x, y, w, h = info["xyz_box"]
+    if crop.shape[:2] != (h, w):
+        return out + [f"xyz map is {crop.shape[1]}x{crop.shape[0]}, box says {w}x{h}"]
+    vis_crop = visib[y : y + h, x : x + w]
+    out += check_xyz_support(crop, vis_crop)
+    out += check_xyz(crop, vis_crop, (x, y), rec, lo, hi)
+    if depth is not None:
+        out += check_depth(depth[y : y + h, x : x + w], crop, vis_crop, rec, manifest["xyz_dtype"])
+    return out
+
+
+def check_gt_info(
+    info: dict[str, Any], visib: np.ndarray, whole: tuple[int, list[int]], valid: int
+) -> list[str]:
+    """scene_gt_info in bop_toolkit's conventions: BOP boxes (w = max - min, -1 when nothing is visible),
+    px_count_all and bbox_obj of the whole projection (`whole`, recomputed from the model), px_count_valid
+    = mask pixels with a depth value (`valid`), visib_fract = px_count_visib / px_count_all."""
+    expected = bop.gt_info_entry(*whole, visib, valid, info["xyz_box"])
+    out = [
+        f"{k} {info[k]} != {v} (from the masks and the model)"
+        for k, v in expected.items()
+        if k not in ("visib_fract", "xyz_box") and info[k] != v
+    ]
+    if not np.isclose(info["visib_fract"], expected["visib_fract"]):
+        out.append(f"visib_fract {info['visib_fract']} != px_count_visib / px_count_all")
+    return out
+
+
+def check_depth(
+    depth: np.ndarray, crop: np.ndarray, vis: np.ndarray, rec: dict[str, Any], xyz_dtype: str
+) -> list[str]:
+    """The depth image (cropped like the xyz map) must hold the z of the xyz map's points, K(R C + t):
+    within half a depth unit, plus the rounding of the xyz map's own dtype."""
+    R, t = bop.gt_pose(rec["scene_gt"][0])
+    unit_m = rec["scene_camera"]["depth_scale"] / bop.MM_PER_M
+    vs, us = np.nonzero(vis)
+    C = crop[vs, us].astype(np.float64)
+    rounding = np.sqrt(3) * float(np.finfo(xyz_dtype).eps) / 2 * np.abs(C).max(initial=0.0)
+    err = np.abs(depth[vs, us] * unit_m - (C @ R.T + t)[:, 2])
+    bad = int((err > 0.5 * unit_m + rounding + 1e-9).sum())
+    return [f"depth differs from the xyz map's z at {bad} of {len(err)} visible pixels"] if bad else []
+
+
+def check_xyz_support(crop: np.ndarray, vis: np.ndarray) -> list[str]:
+    """An xyz map (crop) must be zero outside mask_visib (cropped alike): the labels of hidden pixels would
+    teach a network the surface behind an occluder."""
+    n = int((np.abs(crop).max(axis=-1) > 0)[~vis].sum())
+    return [f"xyz map non-zero at {n} pixels outside mask_visib"] if n else []
+
+
+def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: dict[str, Any],
+              lo: np.ndarray, hi: np.ndarray) -> list[str]:  # fmt: skip
+    """xyz must reproject onto its own pixels and lie inside the model's bounding box."""
+    R, t = bop.gt_pose(rec["scene_gt"][0])
+    camera = bop.camera_spec(rec["scene_camera"], *vis.shape[::-1])
+    vs, us = np.nonzero(vis)
+    C = crop[vs, us].astype(np.float64)
+    err = reprojection_error(C, us + offset[0], vs + offset[1], camera, R, t)
+    out = []
+    share = float((err <= REPROJ_TOL_PX).mean()) if len(err) else 1.0
+    if share < REPROJ_MIN_SHARE:
+        out.append(f"xyz reprojects within {REPROJ_TOL_PX} px for only {share:.1%} of visible pixels")
+    tol = 0.01 * float(np.max(hi - lo))
+    outside = ((lo - tol > C) | (hi + tol < C)).any(axis=1)
+    if outside.any():
+        out.append(f"{int(outside.sum())} xyz values outside the model bounding box")
+    return out
+
+
+def reprojection_error(C: np.ndarray, u: np.ndarray, v: np.ndarray, camera: CameraSpec, R: np.ndarray,
+                       t: np.ndarray) -> np.ndarray:  # fmt: skip
+    """Pixel distance between the projection of R C + t (through the lens, if any) and the pixel centres
+    (u, v) the coordinates were stored at."""
+    uv = camera.project(C @ R.T + t)
+    return np.hypot(uv[:, 0] - u, uv[:, 1] - v)
+
+
+ON_MESH_TOL = 0.005  # fraction of the model diameter an xyz value may lie off the mesh
+ON_MESH_SAMPLES = 1000  # xyz values per instance checked against the mesh (evenly strided)
+
+
+def validate_bop_dataset(root: str | Path, progress: bool = True) -> tuple[list[str], int]:
+    """BOP mode, for datasets scgen did not render (what `scgen annotate` writes): (problems, images).
+
+    Every scene_gt instance has masks and a scene_gt_info entry agreeing with them, and an xyz map that
+    is zero outside mask_visib, reprojects onto its own pixels and lies on the model's mesh;
+    mask_visib ⊆ mask, and the visible masks of one image never overlap.
+    """
+    data = open_bop_dataset(Path(root))
+    surfaces = {i: trimesh.proximity.ProximityQuery(bop.read_model_mesh(data.root, i)) for i in data.obj_ids}
+    infos: dict[Path, dict[str, Any] | None] = {}
+    problems: list[str] = []
+    for image in tqdm(data.images, desc="validate", unit="img", disable=not progress):
+        scene = data.scene(image)
+        if scene not in infos:
+            infos[scene] = read_scene_files(scene)[0].get("scene_gt_info")
+        entries = (infos[scene] or {}).get(str(image.im_id))
+        if entries is None or len(entries) != len(image.instances):
+            found = [] if entries is None else entries
+            problems.append(f"{scene} image {image.im_id}: scene_gt_info.json has {len(found)} of "
+                            f"{len(image.instances)} entries")  # fmt: skip
+            continue
+        found = check_bop_image(data, image, entries, surfaces)
+        problems += [f"{scene} image {image.im_id}: {p}" for p in found]
+    return problems, len(data.images)
+
+
+def check_bop_image(data: BopDataset, image: BopImage, entries: list[dict[str, Any]],
+                    surfaces: dict[int, trimesh.proximity.ProximityQuery]) -> list[str]:  # fmt: skip
+    """Problems of one image's instances: masks against each other and scene_gt_info, then the xyz maps."""
+    scene, (W, H) = data.scene(image), data.size
+    taken = np.zeros((H, W), np.int32)
+    out: list[str] = []
+    for k, ((obj_id, R, t), info) in enumerate(zip(image.instances, entries, strict=True)):
+        mask = bop.read_mask(bop.mask_path(scene, image.im_id, k))
+        visib = bop.read_mask(bop.mask_path(scene, image.im_id, k, visib=True))
+        if mask is None or visib is None or mask.shape != (H, W) or visib.shape != (H, W):
+            out.append(f"instance {k}: mask or mask_visib missing, unreadable or not {W}x{H}")
+            continue
+        taken += visib
+        problems = []
+        if (visib & ~mask).any():
+            problems.append(f"mask_visib has {int((visib & ~mask).sum())} pixels outside mask")
+        box_differs = bop.bbox(*np.nonzero(visib)[::-1]) != info["bbox_visib"]
+        if int(visib.sum()) != info["px_count_visib"] or box_differs:
+            problems.append("px_count_visib or bbox_visib differ from mask_visib")
+        if info["px_count_all"] < mask.sum():
+            problems.append(f"px_count_all {info['px_count_all']} below the mask's {int(mask.sum())} pixels")
+        diameter = float(data.models_info[str(obj_id)]["diameter"]) / bop.MM_PER_M
+        problems += check_bop_xyz(scene, image, k, visib, info, (R, t), surfaces[obj_id], diameter)
+        out += [f"instance {k}: {p}" for p in problems]
+    if (taken > 1).any():
+        out.append(f"visible masks of different instances overlap at {int((taken > 1).sum())} pixels")
+    return out
+
+
+def check_bop_xyz(scene: Path, image: BopImage, k: int, visib: np.ndarray, info: dict[str, Any],
+                  pose: tuple[np.ndarray, np.ndarray], surface: trimesh.proximity.ProximityQuery,
+                  diameter: float) -> list[str]:  # fmt: skip
+    """An instance's xyz map: present iff visible, the size of its xyz_box, zero outside mask_visib,
+    reprojecting within REPROJ_TOL_PX and lying within ON_MESH_TOL diameters of the mesh."""
+    box = info.get("xyz_box")
+    if box is None:
+        return ["visible pixels but no xyz_box"] if visib.any() else []
+    path = bop.xyz_path(scene, image.im_id, k)
+    try:
+        crop = read_xyz_exr(path)
+    except Exception as exc:  # OpenEXR raises plain exceptions for missing or corrupt files
+        return [f"xyz map missing or unreadable ({path.name}: {exc})"]
+    x, y, w, h = box
+    vis_crop = visib[max(y, 0) : y + h, max(x, 0) : x + w]
+    if crop.shape[:2] != (h, w) or vis_crop.shape != (h, w):
+        return [f"xyz map is {crop.shape[1]}x{crop.shape[0]}, xyz_box {box} (inside the image) says {w}x{h}"]
+    out = check_xyz_support(crop, vis_crop)
+    vs, us = np.nonzero(vis_crop)
+    if len(vs) == 0:
+        return out
+    C = crop[vs, us].astype(np.float64)
+    camera = bop.camera_spec({"cam_K": image.K}, *visib.shape[::-1])
+    err = reprojection_error(C, us + x, vs + y, camera, *pose)
+    share = float((err <= REPROJ_TOL_PX).mean())
+    if share < REPROJ_MIN_SHARE:
+        out.append(f"xyz reprojects within {REPROJ_TOL_PX} px for only {share:.1%} of visible pixels")
+    off = surface.on_surface(C[:: -(-len(C) // ON_MESH_SAMPLES)])[1] > ON_MESH_TOL * diameter
+    if off.mean() > 1 - REPROJ_MIN_SHARE:
+        out.append(f"{off.mean():.1%} of xyz values lie over {ON_MESH_TOL:.1%} of the diameter off the mesh")
+    return out

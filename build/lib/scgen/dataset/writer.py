@@ -1,0 +1,288 @@
+"""Write samples in the BOP layout, atomically, and assemble the per-chunk JSON files at the end.
+
+Each sample's files are written under temporary names and renamed; its record JSON goes last,
+so a sample is either complete on disk or absent. `finalize` rebuilds scene_gt.json,
+scene_camera.json, scene_gt_info.json, the test target lists and metadata.csv from the records in
+sample order, so the result is byte-identical whatever the worker count, shard layout or resume point.
+A sample is written against its dataset's static files: the depth scale of camera.json and the
+model of models/, on which scene_gt_info's full projection is measured (what bop_toolkit renders).
+"""
+
+from __future__ import annotations
+
+import csv
+import functools
+import io
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from scgen.annotate import Annotation
+from scgen.annotate.annotate import full_projection
+from scgen.dataset import bop
+from scgen.dataset.atomic import atomic_write_bytes, atomic_write_text
+from scgen.dataset.bop import read_json
+from scgen.dataset.exr import encode_xyz_exr
+from scgen.dataset.layout import CHUNK, OBJ_ID, Layout, dumps
+from scgen.render.buffers import Buffers, CameraRecord
+from scgen.scenes.attitude import CONE_COLUMNS
+from scgen.scenes.config import distance_range_m
+from scgen.scenes.factors import FLARE_LABELS, noise_group, occluder_config, spec_key, viewpoint_cell
+from scgen.scenes.finish import finish_group
+from scgen.scenes.geometry import matrix_to_quat
+from scgen.scenes.imaging import IDEAL_IMAGING, mid_grey_snr
+from scgen.scenes.model import TargetModel
+from scgen.scenes.sky import sky_labels
+from scgen.scenes.spec import CameraSpec, SceneSpec
+
+METADATA_COLUMNS = (
+    "sample_id", "split", "scene_id", "im_id", "illumination", "sun_irradiance_w_m2", "exposure_ev",
+    "sun_x", "sun_y", "sun_z", "shadow", "shadow_fraction", "shadow_caster", "occlusion", "r_occ",
+    "visib_fract", "px_count_all", "px_count_visib", "requested_occlusion", "occluder_config", "n_occluders",
+    "background", "distance_m", "tx", "ty", "tz", "qw", "qx", "qy", "qz", "viewpoint_cell", "combination_key",
+    "camera", "noise", "noise_gain", "mid_grey_snr", "psf_fwhm_px", "motion_blur_px", "motion_blur_deg",
+    "vignetting", "chromatic_px", "flare", "saturated",
+    "finish", "earth_lat_deg", "earth_lon_deg", "sky_ra_deg", "sky_dec_deg",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class WriteOptions:
+    rgb_format: str = "png"  # png (lossless) or jpg
+    xyz_dtype: str = "float16"
+    save_depth: bool = True  # BOP uint16 depth maps (bop_toolkit's calc_gt_info and VSD need them)
+
+
+def dataset_depth_scale(cfg: dict[str, Any], model: TargetModel) -> float:
+    """The dataset's depth scale (mm per unit): every target point fits, at the largest sampled distance
+    plus the model's radius about its origin (|z| <= |t| + |v|); what lies farther is stored as 0."""
+    radius = float(np.linalg.norm(np.asarray(model.mesh.vertices), axis=1).max())
+    return bop.depth_scale_for(distance_range_m(cfg, model.diameter)[1] + radius)
+
+
+def dataset_target(layout: Layout) -> tuple[np.ndarray, np.ndarray, float]:
+    """(vertices in metres, faces, depth_scale): the dataset's models/ PLY and camera.json, read once per
+    process and dataset (the files are written before any sample and never change)."""
+    ply = layout.models_dir / bop.model_file(OBJ_ID)
+    return _read_target(layout.root, _mtime(ply), _mtime(layout.camera_path))
+
+
+def _mtime(path: Path) -> int:
+    return path.stat().st_mtime_ns if path.exists() else -1
+
+
+@functools.lru_cache(maxsize=4)
+def _read_target(root: Path, *_stamps: int) -> tuple[np.ndarray, np.ndarray, float]:
+    mesh = bop.read_model_mesh(root, OBJ_ID)
+    depth_scale = float(read_json(Layout(root).camera_path)["depth_scale"])
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces), depth_scale
+
+
+def encode_png(img: np.ndarray) -> bytes:
+    """A PNG file of an 8- or 16-bit image (masks, depth, BGR colour)."""
+    ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 3])
+    assert ok
+    return buf.tobytes()
+
+
+def encode_rgb(image: np.ndarray, fmt: str, jpeg_quality: int = 95) -> bytes:
+    """The recorded image's file: RGB (H x W x 3) or one channel (H x W), 8 or 16 bits (PNG only)."""
+    bgr = image[..., ::-1] if image.ndim == 3 else image
+    if fmt == "jpg":
+        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
+        assert ok
+        return buf.tobytes()
+    return encode_png(bgr)
+
+
+def write_sample(
+    layout: Layout, spec: SceneSpec, buffers: Buffers, ann: Annotation, split: str, opts: WriteOptions
+) -> dict[str, Any]:
+    """Write one sample's files atomically, record last; returns the record."""
+    sid = spec.index
+    paths = {
+        "rgb": layout.rgb(split, sid, opts.rgb_format),
+        "mask": layout.mask(split, sid),
+        "mask_visib": layout.mask(split, sid, visib=True),
+    }
+    for p in paths.values():
+        p.parent.mkdir(parents=True, exist_ok=True)
+    quality = spec.imaging.jpeg_quality if spec.imaging else 95
+    atomic_write_bytes(paths["rgb"], encode_rgb(buffers.rgb, opts.rgb_format, quality))
+    atomic_write_bytes(paths["mask"], encode_png(ann.mask.astype(np.uint8) * 255))
+    atomic_write_bytes(paths["mask_visib"], encode_png(ann.mask_visib.astype(np.uint8) * 255))
+    xyz_box = None
+    if ann.px_count_visib > 0:
+        x, y, w, h = ann.bbox_visib
+        xyz_box = [x, y, w, h]
+        xyz_path = layout.xyz(split, sid)
+        xyz_path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(xyz_path, encode_xyz_exr(ann.xyz[y : y + h, x : x + w], opts.xyz_dtype))
+    vertices, faces, depth_scale = dataset_target(layout)
+    depth = bop.encode_depth(buffers.depth, depth_scale)
+    if opts.save_depth:
+        depth_path = layout.depth(split, sid)
+        depth_path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(depth_path, encode_png(depth))
+    vertices_cam = vertices @ spec.target.R_mat.T + spec.target.t_vec
+    gt_info = gt_info_entry(spec.camera, ann, vertices_cam, faces, depth, xyz_box)
+    record = build_record(spec, ann, split, gt_info, depth_scale, buffers.camera)
+    record_path = layout.record(split, sid)
+    record_path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(record_path, dumps(record))
+    return record
+
+
+def gt_info_entry(camera: CameraSpec, ann: Annotation, vertices_cam: np.ndarray, faces: np.ndarray,
+                  depth: np.ndarray, xyz_box: list[int] | None) -> dict[str, Any]:  # fmt: skip
+    """The scene_gt_info.json entry of a rendered sample: the whole projection measured by
+    `full_projection`, px_count_valid = silhouette pixels inside the image with a depth value."""
+    px_count_all, bbox_obj = full_projection(ann.mask, camera, vertices_cam, faces)
+    return bop.gt_info_entry(
+        px_count_all, bbox_obj, ann.mask_visib, int((ann.mask & (depth > 0)).sum()), xyz_box
+    )
+
+
+def build_record(
+    spec: SceneSpec, ann: Annotation, split: str, gt_info: dict[str, Any], depth_scale: float,
+    camera: CameraRecord | None = None,
+) -> dict[str, Any]:  # fmt: skip
+    """Everything finalize needs for the BOP JSON files and the metadata row of one sample; `camera`: what
+    the camera stage decided (None: the base exposure, no flare)."""
+    R, t = spec.target.R_mat, spec.target.t_vec
+    imaging = spec.imaging or IDEAL_IMAGING
+    exposure_ev = camera.exposure_ev if camera else spec.camera.exposure_ev
+    snr = mid_grey_snr(imaging.camera, imaging.gain)
+    q = matrix_to_quat(R)
+    sun = spec.sun.direction
+    meta = {
+        "sample_id": spec.index,
+        "split": split,
+        "scene_id": spec.index // CHUNK,
+        "im_id": spec.index,
+        "illumination": spec.sun.level,
+        "sun_irradiance_w_m2": spec.sun.irradiance,
+        "exposure_ev": exposure_ev,
+        "sun_x": sun[0],
+        "sun_y": sun[1],
+        "sun_z": sun[2],
+        "shadow": ann.shadow_label,
+        "shadow_fraction": ann.shadow_fraction,
+        "shadow_caster": int(spec.shadow_caster),
+        "occlusion": ann.occlusion_group,
+        "r_occ": ann.r_occ,
+        "visib_fract": ann.visib_fract,
+        "px_count_all": ann.px_count_all,
+        "px_count_visib": ann.px_count_visib,
+        "requested_occlusion": spec.requested_occlusion,
+        "occluder_config": occluder_config(spec),
+        "n_occluders": len(spec.occluders),
+        "background": spec.background.kind,
+        "distance_m": spec.distance_m,
+        "tx": t[0],
+        "ty": t[1],
+        "tz": t[2],
+        "qw": q[0],
+        "qx": q[1],
+        "qy": q[2],
+        "qz": q[3],
+        "viewpoint_cell": viewpoint_cell(R, t),
+        "combination_key": spec_key(spec),
+        "camera": imaging.camera["preset"],
+        "noise": noise_group(snr),
+        "noise_gain": imaging.gain,
+        "mid_grey_snr": "" if snr is None else snr,
+        "psf_fwhm_px": imaging.psf_fwhm_px,
+        "motion_blur_px": imaging.motion_blur_px,
+        "motion_blur_deg": imaging.motion_blur_deg,
+        "vignetting": imaging.vignetting,
+        "chromatic_px": imaging.chromatic_px,
+        "flare": FLARE_LABELS[int(bool(camera and camera.flare))],
+        "saturated": camera.saturated if camera else 0.0,
+        "finish": finish_group(spec.finish),
+        **sky_labels(spec.background.params),
+        **(spec.cone.labels() if spec.cone else {}),
+    }
+    scene_camera = {"cam_K": list(spec.camera.K), "depth_scale": depth_scale, "exposure_ev": exposure_ev}
+    if not spec.camera.pinhole:
+        scene_camera["cam_dist"] = list(spec.camera.dist)
+    return {
+        "sample_id": spec.index,
+        "split": split,
+        "scene_gt": [bop.gt_entry(R, t, OBJ_ID)],
+        "scene_camera": scene_camera,
+        "scene_gt_info": [gt_info],
+        "metadata": meta,
+        "spec": spec.to_dict(),
+    }  # fmt: skip
+
+
+def finalize(layout: Layout) -> int:
+    """Assemble chunk JSON files, the test targets and metadata.csv from every record; returns the
+    sample count. Reads one chunk's records at a time (from every split), so its memory stays that of a
+    chunk however large the dataset; rows and targets come out in sample order."""
+    by_chunk: dict[int, list[Path]] = defaultdict(list)
+    for path in layout.record_paths():
+        by_chunk[int(path.stem) // CHUNK].append(path)
+    out = io.StringIO()
+    writer: csv.DictWriter | None = None
+    images: list[TargetImage] = []
+    for chunk in sorted(by_chunk):
+        records = sorted((read_json(p) for p in by_chunk[chunk]), key=lambda r: r["sample_id"])
+        by_split: dict[str, list[dict[str, Any]]] = defaultdict(list)
+        for r in records:
+            by_split[r["split"]].append(r)
+            if writer is None:
+                writer = csv.DictWriter(out, fieldnames=metadata_columns(r), lineterminator="\n")
+                writer.writeheader()
+            writer.writerow({k: _fmt(r["metadata"][k]) for k in writer.fieldnames})
+        for split, recs in by_split.items():
+            d = layout.chunk_dir(split, recs[0]["sample_id"])
+            for name in bop.SCENE_FILES:
+                atomic_write_text(
+                    bop.scene_file(d, name), dumps({str(r["sample_id"]): r[name] for r in recs})
+                )
+        images += target_images(by_split.get(bop.TEST_SPLIT, []))
+    if writer is None:  # no sample yet: the header alone
+        csv.DictWriter(out, fieldnames=METADATA_COLUMNS, lineterminator="\n").writeheader()
+    for kind, targets in target_lists(images).items():
+        atomic_write_text(layout.test_targets(kind), dumps(targets))
+    atomic_write_text(layout.metadata_path, out.getvalue())
+    return sum(len(paths) for paths in by_chunk.values())
+
+
+def metadata_columns(record: dict[str, Any]) -> tuple[str, ...]:
+    """metadata.csv's columns for a dataset holding `record`: every dataset's, then a cone attitude's
+    (scgen.scenes.attitude.CONE_COLUMNS) when its samples were drawn in a cone."""
+    return METADATA_COLUMNS + (CONE_COLUMNS if CONE_COLUMNS[0] in record["metadata"] else ())
+
+
+TargetImage = tuple[int, int, list[dict[str, Any]], list[dict[str, Any]]]  # scene, image, scene_gt, gt_info
+
+
+def target_images(test_records: list[dict[str, Any]]) -> list[TargetImage]:
+    """(scene_id, im_id, scene_gt, scene_gt_info) of each test record, what the target lists read."""
+    return [
+        (r["sample_id"] // CHUNK, r["sample_id"], r["scene_gt"], r["scene_gt_info"]) for r in test_records
+    ]
+
+
+def target_lists(images: list[TargetImage]) -> dict[str, list[dict[str, int]]]:
+    """{"bop19": [...], "bop24": [...]}: the test target lists of these test images (in order)."""
+    return {
+        "bop19": bop.targets_bop19(images),
+        "bop24": bop.targets_bop24([i[:2] for i in images]),
+    }
+
+
+def _fmt(v: Any) -> str:
+    return repr(v) if isinstance(v, float) else str(v)
+
+
+def existing_sample_ids(layout: Layout) -> set[int]:
+    """Sample ids complete on disk (their record exists)."""
+    return {int(p.stem) for p in layout.record_paths()}

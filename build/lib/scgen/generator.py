@@ -1,0 +1,106 @@
+"""The library entry point: the scenes and samples `scgen render` makes, one at a time, in memory.
+
+    from scgen import Generator
+    with Generator.load(seed=0, resolution=(320, 240), backend="mitsuba") as gen:
+        sample = gen.sample(7)  # sample 7 of seed 0: SceneSpec, renderer Buffers, Annotation
+
+The render workers, `scgen preview`, the benchmarks and the tests all go through this class, so a
+sample is sampled, rendered and annotated the same way everywhere.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from scgen.annotate import Annotation, annotate
+from scgen.render.buffers import Buffers
+from scgen.scenes import SceneSpec, TargetShape, load_config, sample_scene
+from scgen.scenes.model import TargetModel, load_target
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One sample before it is written: what was asked for, what the renderer saw, the labels."""
+
+    spec: SceneSpec
+    buffers: Buffers
+    annotation: Annotation
+
+
+class Generator:
+    """Scenes of one target under one sampling config and seed; renders them on first `sample`.
+
+    The renderer (`backend`: blender or mitsuba) is built once, on first use, and kept until `close`.
+    """
+
+    def __init__(
+        self, model: TargetModel, cfg: dict[str, Any], seed: int = 0, backend: str = "blender",
+        quality: str = "default", device: str = "auto", threads: int | None = None,
+    ) -> None:  # fmt: skip
+        self.model, self.cfg, self.seed = model, cfg, seed
+        self.shape = TargetShape.from_mesh(model.mesh, model.diameter)
+        self.render_settings = {"backend": backend, "quality": quality, "device": device, "threads": threads}
+        self.model_source: tuple[Path | None, bool] | None = None  # (file, keep_scale) when loaded from one
+        self._backend: Any = None
+
+    @classmethod
+    def load(
+        cls, model: str | Path | None = None, config: str | Path | None = None, seed: int = 0,
+        resolution: tuple[int, int] | None = None, keep_scale: bool = False,
+        overrides: dict[str, Any] | None = None, camera: str | None = None, **render: Any,
+    ) -> Generator:  # fmt: skip
+        """From files, as `scgen render` reads them: a mesh (None: the bundled spacecraft) and a config.
+
+        `camera` names a camera preset (scgen.scenes.camera_config); `render` takes the renderer
+        settings: backend, quality, device, threads.
+        """
+        cfg = load_config(config, overrides, resolution, camera)
+        generator = cls(load_target(model, keep_scale=keep_scale), cfg, seed, **render)
+        generator.model_source = (None if model is None else Path(model), keep_scale)
+        return generator
+
+    def scene(self, index: int) -> SceneSpec:
+        """The SceneSpec of sample `index`: pure and cheap, no renderer involved."""
+        return sample_scene(self.seed, index, self.cfg, self.shape)
+
+    def render(self, spec: SceneSpec) -> Sample:
+        """Render and annotate one SceneSpec."""
+        if self._backend is None:
+            from scgen.render.base import create_backend
+
+            r = self.render_settings
+            self._backend = create_backend(r["backend"], self.model, r["quality"], r["device"], r["threads"])
+        buffers = self._backend.render(spec)
+        return Sample(spec, buffers, annotate(spec, buffers))
+
+    def sample(self, index: int) -> Sample:
+        """Sample `index` of the seed, rendered and annotated exactly as `scgen render` writes it."""
+        return self.render(self.scene(index))
+
+    def close(self) -> None:
+        """Release the renderer (a later `sample` builds a new one)."""
+        if self._backend is not None:
+            self._backend.close()
+            self._backend = None
+
+    def __enter__(self) -> Generator:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled without its renderer, and as its model file when it has one (not the meshes): a
+        render worker receives a few hundred bytes and loads the model itself."""
+        model = self.model_source or self.model
+        return _rebuild, (model, self.cfg, self.seed, self.render_settings)
+
+
+def _rebuild(model: TargetModel | tuple[Path | None, bool], cfg: dict[str, Any], seed: int,
+             render_settings: dict[str, Any]) -> Generator:  # fmt: skip
+    source = model if isinstance(model, tuple) else None
+    generator = Generator(load_target(*source) if source else model, cfg, seed, **render_settings)
+    generator.model_source = source
+    return generator

@@ -1,0 +1,165 @@
+"""Procedural background images in linear radiance, deterministic from the background seed.
+
+Both backends render the foreground over a transparent film and composite it over these, so
+the backgrounds are the same image whatever the renderer. Kinds:
+- clean: black space with a sparse, faint star field;
+- complex: a dense star field, a Milky-Way band with dust lanes and coloured nebula glow;
+- earth: a lit Earth limb or disc (oceans with sun glint, continents, ice, clouds, atmosphere rim);
+- cluttered: a moderate star field (the clutter itself is 3D props, rendered by the backend);
+- user: an image of the user's own (the sampler picks the file), cover-cropped, sRGB decoded.
+The sun's glare is the camera stage's (scgen.render.camera.glare), over the whole image.
+Sunlit things (the Earth) follow the camera model of scgen.render.lighting: they scale with the
+sun irradiance and the exposure. Stars and nebulae only scale with exposure; their brightness is
+exaggerated for visibility (real stars are about 1e-8 of a sunlit plate).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from scgen.errors import ScgenError
+from scgen.render.bluemarble import level_of_detail
+from scgen.render.earth_surface import bluemarble_surface, procedural_surface
+from scgen.render.lighting import exposure_scale
+from scgen.render.stars import star_image
+from scgen.render.textures import smooth_noise
+from scgen.scenes.geometry import random_rotation, unit_sphere_hits
+from scgen.scenes.sky import earth_frame, sky_frame
+from scgen.scenes.spec import SceneSpec
+
+STARS_PER_MEGAPIXEL = {"clean": 150, "earth": 150, "cluttered": 600, "complex": 6000}
+SKY_BLUE = np.array([0.22, 0.45, 1.0])  # atmosphere scattering colour
+
+
+def background_image(spec: SceneSpec) -> np.ndarray:
+    """H x W x 3 float32 linear background for this sample."""
+    cam = spec.camera
+    rng = np.random.default_rng(spec.background.seed)
+    kind = spec.background.kind
+    if kind == "user":
+        return _user_image(spec, rng)
+    gain = 2.0 ** (-cam.exposure_ev)
+    params = spec.background.params
+    if params.get("stars") == "hipparcos":
+        img = star_image(cam, sky_frame(params), params["stars_boost_ev"])
+    else:
+        density = STARS_PER_MEGAPIXEL[kind] * cam.width * cam.height / 1e6
+        img = _star_field(rng, cam.height, cam.width, int(density)) * gain
+    if kind == "complex":
+        rays = spec.camera.pixel_directions()
+        img += gain * _milky_way(rng, rays)
+        img += gain * _nebula(rng, cam.height, cam.width)
+    elif kind == "earth":
+        img = _earth(spec, rng, spec.camera.pixel_directions(), img)
+    return img.astype(np.float32)
+
+
+def _star_field(rng: np.random.Generator, h: int, w: int, n_stars: int) -> np.ndarray:
+    """Point stars with a power-law flux distribution and black-body-like tints, blurred by the optics."""
+    img = np.zeros((h, w, 3), np.float32)
+    ys = rng.uniform(0, h - 1, n_stars)
+    xs = rng.uniform(0, w - 1, n_stars)
+    flux = 0.015 * (rng.pareto(1.4, n_stars) + 0.3).clip(0, 60)
+    temperature = rng.uniform(0, 1, n_stars)[:, None]
+    colour = (1 - temperature) * np.array([1.0, 0.8, 0.62]) + temperature * np.array([0.72, 0.84, 1.0])
+    value = (flux[:, None] * colour).astype(np.float32)
+    # bilinear splat: sub-pixel positions, so faint stars are not all single hot pixels
+    x0, y0 = np.floor(xs).astype(int), np.floor(ys).astype(int)
+    fx, fy = (xs - x0)[:, None], (ys - y0)[:, None]
+    for dy, wy in ((0, 1 - fy), (1, fy)):
+        for dx, wx in ((0, 1 - fx), (1, fx)):
+            np.add.at(img, (np.minimum(y0 + dy, h - 1), np.minimum(x0 + dx, w - 1)), value * wx * wy)
+    return cv2.GaussianBlur(img, (0, 0), 0.7) * 3.0
+
+
+def _milky_way(rng: np.random.Generator, rays: np.ndarray) -> np.ndarray:
+    """A galactic band along a random great circle: diffuse glow, mottled, with dark dust lanes."""
+    h, w = rays.shape[:2]
+    pole = rng.normal(size=3)
+    pole /= np.linalg.norm(pole)
+    lat = np.arcsin(np.clip(rays @ pole, -1, 1))
+    mottle = smooth_noise(rng, h, w, octaves=6, base=3)
+    dust = smooth_noise(rng, h, w, octaves=6, base=4)
+    width = rng.uniform(0.12, 0.25)
+    band = np.exp(-((lat / width) ** 2)) * (0.3 + mottle)
+    lanes = 1.0 - 0.9 * np.exp(-((lat / (0.4 * width)) ** 2)) * np.clip((dust - 0.4) * 4, 0, 1)
+    return (0.07 * band * lanes)[..., None] * np.array([1.0, 0.92, 0.8])
+
+
+def _nebula(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+    """Coloured emission/reflection glow: sparse fractal clouds in two hues."""
+    out = np.zeros((h, w, 3), np.float32)
+    for hue in (np.array([1.0, 0.35, 0.45]), np.array([0.35, 0.55, 1.0])):
+        density = np.clip(smooth_noise(rng, h, w, octaves=6, base=2) - 0.45, 0, None) ** 1.5
+        out += (rng.uniform(0.0, 0.25) * density[..., None] * hue).astype(np.float32)
+    return out
+
+
+def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np.ndarray) -> np.ndarray:
+    """A lit Earth: the unit sphere at direction c seen with angular radius rho, over the star field.
+
+    Lambertian surface (scgen.render.earth_surface: Blue Marble or procedural, with clouds; oceans
+    with a sun glint) under the sun, a scattering haze thickening towards the limb, and a thin glow
+    above it; night side black.
+    """
+    params = spec.background.params
+    c = np.asarray(params["centre_dir"], np.float64)
+    rho = np.deg2rad(params["angular_radius_deg"])
+    centre = c / np.sin(rho)  # Earth of radius 1 at this distance subtends rho
+    hit, n, b, disc = unit_sphere_hits(rays, centre)  # n: unit surface normals
+    sun = np.asarray(spec.sun.direction)
+    irr = spec.sun.irradiance * exposure_scale(spec)  # image value of a white plate facing the sun
+
+    mu_s = n @ sun
+    mu_v = -np.sum(n * rays[hit], axis=1)  # cosine of the viewing angle (1 at disc centre, 0 at limb)
+    if params.get("earth_map") == "bluemarble":
+        q = n @ earth_frame(params).T  # Earth-fixed coordinates: z the north pole, x Greenwich
+        distance = np.linalg.norm(n + centre, axis=1)  # camera to surface, in Earth radii
+        footprint = distance / spec.camera.focal / np.sqrt(np.maximum(mu_v, 1e-3))  # arc per pixel
+        surface, water, cloud = bluemarble_surface(q, level_of_detail(footprint), spec.background.seed)
+    else:
+        q = n @ random_rotation(rng).T  # continents do not follow the camera
+        surface, water, cloud = procedural_surface(rng, q)
+    lit = np.clip(mu_s, 0, 1)[:, None]
+    half = sun - rays[hit]
+    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    glint = 0.15 * water * (1 - cloud) * np.clip(np.sum(n * half, 1), 0, 1)[:, None] ** 2000
+    haze_depth = 1.0 / np.maximum(mu_v, 0.08)  # optical path through the atmosphere grows to the limb
+    haze = 0.035 * haze_depth[:, None] * SKY_BLUE * np.clip(mu_s + 0.15, 0, 1)[:, None]
+    radiance = (surface * lit + glint * (mu_s > 0)[:, None]) * np.exp(-0.05 * haze_depth)[:, None] + haze
+
+    img = stars.copy()
+    img[hit] = irr * radiance
+    # glow above the limb: thin shell of scattered light on the day side
+    gap = np.sqrt(np.clip(-disc, 0, None))  # grows with angular distance outside the limb
+    outside = ~hit
+    limb_normal = rays[outside] * b[outside][:, None] - centre
+    limb_normal /= np.maximum(np.linalg.norm(limb_normal, axis=1, keepdims=True), 1e-9)
+    day = np.clip(limb_normal @ sun + 0.2, 0, 1)
+    glow = 0.12 * np.exp(-gap[outside] / 0.025) * day
+    img[outside] += irr * glow[:, None] * SKY_BLUE
+    return img.astype(np.float32)
+
+
+def _user_image(spec: SceneSpec, rng: np.random.Generator) -> np.ndarray:
+    """The sampled user image, cover-resized and cropped at random, sRGB decoded to linear.
+
+    Photographs are display-referred: they are used as they are, not scaled by the exposure.
+    """
+    path = spec.background.params["image"]
+    img = cv2.imread(path, cv2.IMREAD_COLOR)
+    if img is None:
+        raise ScgenError(f"cannot read background image {path}")
+    img = img[..., ::-1]
+    h, w = spec.camera.height, spec.camera.width
+    scale = max(h / img.shape[0], w / img.shape[1])
+    size = (max(w, int(np.ceil(img.shape[1] * scale))), max(h, int(np.ceil(img.shape[0] * scale))))
+    img = cv2.resize(img, size, interpolation=cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR)
+    y0 = int(rng.integers(0, img.shape[0] - h + 1))
+    x0 = int(rng.integers(0, img.shape[1] - w + 1))
+    return srgb_to_linear(img[y0 : y0 + h, x0 : x0 + w].astype(np.float32) / 255.0)
+
+
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)

@@ -1,0 +1,156 @@
+"""Blender (bpy + Cycles) backend, the default renderer: exact pixel-centre labels, fast, flat memory.
+
+Per sample: update the persistent scenes in place (blender_scene), render the anti-aliased beauty
+image (RGB + depth + object index from the centred first sample), then a one-sample aux render
+(normals, sun visibility, target-alone depth), and turn the passes into Buffers (pure numpy).
+bpy is imported only when a backend is made, so scgen works without it for other backends.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import weakref
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from scgen.render.backgrounds import background_image
+from scgen.render.blender_env import import_bpy, select_device
+from scgen.render.blender_scene import ALONE, BEAUTY, PROBE, BlenderScene
+from scgen.render.blender_settings import preset
+from scgen.render.buffers import BACKGROUND_ID, TARGET_ID, Buffers
+from scgen.render.camera import record_image, render_camera
+from scgen.scenes.geometry import project
+from scgen.scenes.model import TargetModel
+from scgen.scenes.spec import SceneSpec
+
+if TYPE_CHECKING:
+    from scgen.render.mitsuba_backend import MitsubaBackend
+
+GRAZING = 1e-4  # |n.s| below this: the surface is edge-on to the sun, its visibility is not measured
+
+
+class BlenderBackend:
+    """Renders SceneSpecs with Cycles; one live instance per process (bpy is a process-wide singleton)."""
+
+    name = "blender"
+
+    def __init__(
+        self, model: TargetModel, quality: str = "default", device: str = "auto", threads: int | None = None
+    ) -> None:
+        """`device`: auto (a GPU when Cycles finds one), cpu or gpu; `threads`: CPU threads (None: all)."""
+        quality_preset = preset(quality)
+        self._bpy = import_bpy()
+        self._bpy.ops.wm.read_factory_settings(use_empty=True)  # also resets the device preferences
+        self.device = select_device(self._bpy, device)
+        self._workdir = Path(tempfile.mkdtemp(prefix="scgen-blender-", dir=_ram_dir()))
+        # removed on close(), or when the backend is collected or the interpreter exits unclosed
+        self._remove_workdir = weakref.finalize(self, shutil.rmtree, self._workdir, True)
+        gpu = self.device != "CPU"
+        self.scene = BlenderScene(self._bpy, model, quality_preset, gpu, threads, self._workdir)
+        self._hull = np.asarray(model.mesh.convex_hull.vertices, np.float64)
+        self._model, self._rays = model, None
+
+    @property
+    def cycles_s(self) -> float:
+        """Seconds spent inside Cycles' render calls so far (EXR writing included)."""
+        return self.scene.cycles_s
+
+    def render(self, spec: SceneSpec) -> Buffers:
+        shown = replace(spec, camera=render_camera(spec.camera))
+        self.scene.update(shown)
+        beauty = self.scene.render_beauty()
+        if shown.camera == spec.camera:  # not `is`: render_camera's cache returns an equal camera of before
+            instance, depth = instance_and_depth(beauty)
+            aux = self.scene.render_aux(target_alone=props_may_hide_target(spec, self._hull, instance, depth))
+            buffers = buffers_from_passes(spec, beauty, aux)
+        else:  # a lens Cycles' pinhole image does not sample: labels by exact ray casts along its rays
+            buffers = self._ray_caster().render_geometry(spec)
+        image = composite(beauty, background_image(shown))
+        buffers.rgb, buffers.camera = record_image(spec, image, buffers.instance)
+        return buffers
+
+    def _ray_caster(self) -> MitsubaBackend:
+        """The Mitsuba backend's exact geometric passes, made on first need (cameras with a lens)."""
+        if self._rays is None:
+            from scgen.render.mitsuba_backend import MitsubaBackend
+
+            self._rays = MitsubaBackend(self._model)  # Dr.Jit's threads are per process: Mitsuba's default
+        return self._rays
+
+    def close(self) -> None:
+        """Free every Blender datablock (and Cycles' persistent data) and the EXR folder."""
+        self._bpy.ops.wm.read_factory_settings(use_empty=True)
+        self._remove_workdir()
+
+
+def _ram_dir() -> str | None:
+    """/dev/shm where it exists: the per-frame EXRs never touch the disk."""
+    return "/dev/shm" if Path("/dev/shm").is_dir() else None
+
+
+def instance_and_depth(beauty: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Instance ids and z-depth (0 on the background) from the beauty render's centred first samples."""
+    instance = np.rint(beauty[f"{BEAUTY}.Object Index.X"]).astype(np.int32)
+    depth = np.where(instance != BACKGROUND_ID, beauty[f"{BEAUTY}.Depth.Z"], 0.0).astype(np.float32)
+    return instance, depth
+
+
+def props_may_hide_target(spec: SceneSpec, hull: np.ndarray, instance: np.ndarray, depth: np.ndarray) -> bool:
+    """False only when no prop can hide any target pixel, so the target-alone depth needs no render.
+
+    A hidden target pixel lies in the box of the projected hull vertices (model frame `hull`)
+    under a prop pixel nearer than the target's farthest point.
+    """
+    if not spec.props:
+        return False
+    x = hull @ spec.target.R_mat.T + spec.target.t_vec
+    if x[:, 2].min() <= 0:  # partly behind the camera: the projected box is not a bound
+        return True
+    uv = project(spec.camera.K_mat, x)
+    h, w = instance.shape
+    u0, v0 = np.clip(np.floor(uv.min(0)).astype(int), 0, [w, h])
+    u1, v1 = np.clip(np.ceil(uv.max(0)).astype(int) + 1, 0, [w, h])
+    window = np.s_[v0:v1, u0:u1]
+    return bool(((instance[window] > TARGET_ID) & (depth[window] < x[:, 2].max())).any())
+
+
+def composite(beauty: dict[str, np.ndarray], background: np.ndarray) -> np.ndarray:
+    """The linear beauty image over the background (straight alpha from Cycles' film transparency)."""
+    rgba = np.stack([beauty[f"{BEAUTY}.Combined.{c}"] for c in "RGBA"], axis=-1)
+    alpha = np.clip(rgba[..., 3:], 0.0, 1.0)
+    return rgba[..., :3] + (1.0 - alpha) * background
+
+
+def buffers_from_passes(
+    spec: SceneSpec, beauty: dict[str, np.ndarray], aux: dict[str, np.ndarray]
+) -> Buffers:
+    """The label passes from the EXR channels of the beauty and aux renders (see blender_scene for the
+    layers); the image is the camera stage's."""
+    instance, depth = instance_and_depth(beauty)
+    hit = instance != BACKGROUND_ID
+    on_target = instance == TARGET_ID
+    if f"{ALONE}.Depth.Z" in aux:
+        alone = aux[f"{ALONE}.Depth.Z"]
+        target_depth = np.where(alone < 1e9, alone, 0.0).astype(np.float32)  # Cycles' miss depth is 1e10
+    else:
+        target_depth = np.where(on_target, depth, 0.0).astype(np.float32)
+
+    normal = np.stack([aux[f"{PROBE}.Normal.{c}"] for c in "XYZ"], axis=-1)
+    length = np.linalg.norm(normal, axis=-1, keepdims=True)
+    unit = normal / np.maximum(length, 1e-12)
+    normal = np.where(hit[..., None] & (length > 0), unit, 0.0).astype(np.float32)
+    edge_on = np.abs(normal @ np.asarray(spec.sun.direction, np.float32)) <= GRAZING
+    sun_blocked = on_target & (aux[f"{PROBE}.Combined.R"] <= 0.0) & ~edge_on
+
+    return Buffers(
+        rgb=np.zeros((*instance.shape, 3), np.uint8),
+        depth=depth,
+        instance=instance,
+        target_depth=target_depth,
+        normal=normal,
+        sun_blocked=sun_blocked,
+    )

@@ -1,0 +1,43 @@
+"""What a renderer returns for one scene: per-pixel buffers and the instance-id convention.
+
+Renderers produce Buffers, annotate and the writer consume them: the one scgen.render module that
+annotation and the writer import.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+BACKGROUND_ID = 0
+TARGET_ID = 1  # props get ids 2, 3, ... in SceneSpec.props order
+
+
+@dataclass(frozen=True)
+class CameraRecord:
+    """What the camera stage decided for one image: the exposure it used (base + shift, EV), whether the
+    sun flared, and the share of pixel values at the ADC's top code (over-exposure)."""
+
+    exposure_ev: float
+    flare: bool
+    saturated: float
+
+
+@dataclass
+class Buffers:
+    """Per-pixel renderer output, all H x W, OpenCV pixel-centre convention.
+
+    depth / target_depth: z along the optical axis in metres, 0 where nothing is hit.
+    instance: BACKGROUND_ID, TARGET_ID, or 2 + index into SceneSpec.props.
+    normal: camera-frame unit normal facing the camera (zeros on background).
+    sun_blocked: the ray from the visible surface towards the sun hits a non-target object.
+    """
+
+    rgb: np.ndarray  # the recorded image (the camera stage's): uint8/uint16, H x W x 3 or H x W (mono)
+    depth: np.ndarray  # float32
+    instance: np.ndarray  # int32
+    target_depth: np.ndarray  # float32, the target rendered alone (for the full mask)
+    normal: np.ndarray  # float32 H x W x 3
+    sun_blocked: np.ndarray  # bool
+    camera: CameraRecord | None = None  # set with rgb by the camera stage

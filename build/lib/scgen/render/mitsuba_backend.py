@@ -1,0 +1,398 @@
+"""Mitsuba 3 backend: fast CPU renders for tests and an independent cross-check of Blender.
+
+RGB comes from Mitsuba's path tracer; the geometric passes (depth, instance ids, normals,
+the target-alone depth, shadow rays) come from exact ray casts through pixel centres, so no
+filtered or jittered sample ever blends two surfaces at an edge.
+
+A worker keeps one scene (per camera, with or without the Earth's light) for its whole run and refills it
+every sample: the target's triangles go into one mesh per finish BSDF, the props' into one mesh per
+material class (mitsuba_slots), and the lights take the sample's direction and irradiance. Then the render
+replays a frozen recording (drjit.freeze) instead of tracing the path tracer through every live BSDF
+again (about 20 ms a sample at any image size); it records again only when the set of meshes, BSDFs or
+lights grows, a mesh outgrows its capacity, or the lights' bounding sphere changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+from trimesh.transformations import transform_points
+
+from scgen.render.backgrounds import background_image
+from scgen.render.buffers import BACKGROUND_ID, TARGET_ID, Buffers
+from scgen.render.camera import record_image, render_camera
+from scgen.render.conventions import CLIP_END_M, CLIP_START_M, MITSUBA_THREADS, check_quality, render_seed
+from scgen.render.mitsuba_lights import SceneLights, light_radius, sample_lights
+from scgen.render.mitsuba_llvm import mitsuba_setup
+from scgen.render.mitsuba_materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
+from scgen.render.mitsuba_memory import aligned
+from scgen.render.mitsuba_slots import MeshSlot, build_mesh, registry_id
+from scgen.render.props import prop_mesh
+from scgen.render.ray_cull import may_hit
+from scgen.scenes.model import TargetModel
+from scgen.scenes.spec import SceneSpec
+
+QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
+GUARD_M = 1e4  # half the span of the guard triangle (see MitsubaBackend.__init__)
+PROP_SLOT_TRIANGLES = 4096  # a material's prop mesh holds this many triangles at first (it grows if need be)
+FINISHES_PER_CLASS = 3  # target BSDFs (and meshes) made per material class at the start (see TargetFinishes)
+RECORDINGS_KEPT = 32  # frozen renders a backend keeps, the least recently used dropped first
+
+
+def select_variant() -> str:
+    """Set the variant mitsuba_llvm chose for this process (llvm_ad_rgb when its libLLVM renders, else
+    scalar_rgb), unless one is set already; returns the variant in use."""
+    if mi.variant() is None:
+        mi.set_variant(mitsuba_setup().variant)
+    return mi.variant()
+
+
+class SampleMeshes:
+    """Where a sample's shapes went: the target's slots (one per part class, in the model's class order)
+    and the props' (one per material with any), with the prop each of their triangles belongs to."""
+
+    def __init__(self) -> None:
+        self.target: list[MeshSlot] = []
+        self.props: list[MeshSlot] = []
+        self.owners: list[np.ndarray] = []  # per prop mesh: index into SceneSpec.props, per triangle
+        self.extent = 0.0  # the largest |coordinate| of any corner (metres, camera frame)
+        self.target_corners: list[np.ndarray] = []  # per target slot: its triangles' corners (3F x 3)
+
+
+class MitsubaBackend:
+    """Renders SceneSpecs with Mitsuba; one instance per worker process."""
+
+    name = "mitsuba"
+
+    def __init__(self, model: TargetModel, quality: str = "default", threads: int = MITSUBA_THREADS) -> None:
+        """`threads`: Dr.Jit's CPU threads, for the whole process (above MITSUBA_THREADS, see there)."""
+        self.variant = select_variant()
+        dr.set_thread_count(threads)
+        self.model = model
+        check_quality(quality)
+        self.spp = QUALITY_SPP[quality]
+        self.bsdfs = build_bsdfs()
+        self._classes: dict[str, list[int]] = {}  # material class -> its parts, one target mesh each
+        for k, (material, _) in enumerate(model.parts):
+            self._classes.setdefault(material, []).append(k)
+        self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
+        self._finishes = TargetFinishes(FINISHES_PER_CLASS)
+        self._reach = 1.01 * float(np.linalg.norm(model.mesh.vertices, axis=1).max())  # target's radius
+        # the target's slots, one per BSDF it is drawn with (named as TargetFinishes names them, or by the
+        # nominal class), each large enough for the largest part class; the props', one per material class
+        self._target_capacity = max(
+            sum(len(model.parts[k][1].faces) for k in ks) for ks in self._classes.values()
+        )
+        self._target_slots = {
+            name: MeshSlot(f"target_{name}", bsdf, self._target_capacity)
+            for name, bsdf in self._finishes.pooled()
+        }
+        self._prop_slots = {m: MeshSlot(f"props_{m}", b, PROP_SLOT_TRIANGLES) for m, b in self.bsdfs.items()}
+        # the target's triangles that rays meeting a prop first may hit, cast again through the target alone
+        self._target_alone = MeshSlot("target_alone", self.bsdfs["white_paint"], len(model.mesh.faces))
+        # one triangle of no area, never hit, whose box spans 20 km: beside it Embree finds no spatial
+        # split worth making, and builds the target's BVH in 8 ms instead of 19 (labels are the same)
+        far = GUARD_M * np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [1.0, 1.0, -1.0]])
+        self._guard = build_mesh("guard", far, np.zeros((3, 2)), self.bsdfs["white_paint"])
+        # the path tracer's scenes, by (camera, with the Earth's light), with their lights
+        self._scenes: dict[tuple, tuple[mi.Scene, SceneLights]] = {}
+        self._cast_scenes: dict[str, mi.Scene] = {}  # ray-cast scenes kept likewise (see _cast_scene)
+        # this backend's own recordings: they hold the addresses of its meshes' buffers, which another
+        # backend's meshes in the same layout would not have
+        self._frozen_render = dr.freeze(_render_scene, limit=RECORDINGS_KEPT, warn_after=2**31 - 1)
+        self._frozen_intersect = dr.freeze(intersect_from_origin, limit=RECORDINGS_KEPT, warn_after=2**31 - 1)
+
+    def close(self) -> None:
+        pass
+
+    @property
+    def recordings(self) -> int:
+        """How many renders traced the path tracer and recorded it; every other render replayed one."""
+        return self._frozen_render.n_recordings if dr.is_jit_v(mi.Float) else 0
+
+    def _fill(self, spec: SceneSpec, shaded: bool = True) -> SampleMeshes:
+        """Put the sample's target and props, in the camera frame, into their slots. `shaded`: the target
+        with the sample's finish (else the nominal BSDFs)."""
+        T = spec.target.matrix
+        finish = {cls: f for cls, f in spec.finish.items() if cls in self._classes} if shaded else {}
+        dr.sync_thread()  # no kernel still reads what this sample overwrites (its meshes, finishes, lights)
+        drawn_with = self._finishes.bsdfs(finish)
+        layout, filled = SampleMeshes(), set()
+        for cls, parts in self._classes.items():
+            name, bsdf = drawn_with.get(cls, (cls, self.bsdfs[cls]))
+            if name not in self._target_slots:
+                self._target_slots[name] = MeshSlot(f"target_{name}", bsdf, self._target_capacity)
+                self._scenes.clear()  # a new mesh: every scene is rebuilt with it
+                self._cast_scenes.clear()
+            drawn = spec.finish[cls]["material"] if cls in spec.finish else cls
+            corners = np.concatenate([transform_points(mesh.vertices, T)[mesh.faces].reshape(-1, 3)
+                                      for mesh in (self.model.parts[k][1] for k in parts)])  # fmt: skip
+            uv = np.concatenate([self._part_uv(k, drawn) for k in parts])
+            slot = self._target_slots[name]
+            slot.fill(corners, uv)
+            filled.add(name)
+            layout.target.append(slot)
+            layout.target_corners.append(corners)
+            layout.extent = max(layout.extent, float(np.abs(corners.astype(np.float32)).max()))
+        for name, slot in self._target_slots.items():
+            if name not in filled:
+                slot.fill(np.zeros((0, 3)), np.zeros((0, 2)))
+        by_material: dict[str, list[tuple[int, np.ndarray, np.ndarray]]] = {}
+        for k, prop in enumerate(spec.props):
+            m = prop_mesh(prop)
+            local = (np.asarray(m.vertices) - prop.pose.t_vec) @ prop.pose.R_mat  # UVs stick to the prop
+            uv = box_uv(local, np.asarray(m.faces), texture_scale(prop.material, max(prop.size)))
+            corners = np.asarray(m.vertices)[np.asarray(m.faces)].reshape(-1, 3)
+            by_material.setdefault(prop.material, []).append((k, corners, uv))
+            layout.extent = max(layout.extent, float(np.abs(corners.astype(np.float32)).max()))
+        for material, slot in self._prop_slots.items():
+            pieces = by_material.get(material, [])
+            slot.fill(np.concatenate([c for _, c, _ in pieces] or [np.zeros((0, 3))]),
+                      np.concatenate([uv for _, _, uv in pieces] or [np.zeros((0, 2))]))  # fmt: skip
+            if pieces:
+                layout.props.append(slot)
+                layout.owners.append(np.concatenate([np.full(len(c) // 3, k) for k, c, _ in pieces]))
+        return layout
+
+    def _part_uv(self, k: int, material: str) -> np.ndarray:
+        """Target part k's UVs, scaled for the material class it is rendered with."""
+        if (k, material) not in self._uv:
+            mesh = self.model.parts[k][1]
+            scale = texture_scale(material, self.model.diameter)
+            self._uv[k, material] = box_uv(np.asarray(mesh.vertices), np.asarray(mesh.faces), scale)
+        return self._uv[k, material]
+
+    def render(self, spec: SceneSpec) -> Buffers:
+        layout = self._fill(spec)
+        scene = self._scene(spec, layout)
+        buffers = self._passes(spec, scene, layout)
+        buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, scene, layout), buffers.instance)
+        return buffers
+
+    def render_geometry(self, spec: SceneSpec) -> Buffers:
+        """Only the exact geometric passes (RGB left black): labels at a fraction of the cost."""
+        layout = self._fill(spec, shaded=False)
+        return self._passes(spec, self._cast_scene("all", self._slots()), layout)
+
+    def _passes(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> Buffers:
+        """The exact geometric passes of `scene` (holding `layout`'s meshes): one ray per pixel centre.
+
+        The target-alone depth equals the depth wherever the target is hit first; only the rays that hit
+        a prop no farther than the target's bounding sphere reaches are cast again, through the target alone.
+        """
+        W, H = spec.camera.width, spec.camera.height
+        rays_cam = spec.camera.pixel_directions().reshape(-1, 3)
+        shapes = layout.target + layout.props
+        t_all, idx_all, normal, prim = cast_rays(scene, shapes, rays_cam, self._intersect)
+        n_target = len(layout.target)
+        hit = idx_all >= 0
+        on_target = hit & (idx_all < n_target)
+        on_prop = hit & ~on_target
+        t_tgt = np.where(on_target, t_all, np.inf)
+        behind = on_prop & self._may_reach_target(spec, rays_cam, t_all)
+        if behind.any():  # as many rays as the image has (the first repeated), so one recording serves all
+            chosen = rays_cam[behind]
+            rays = np.concatenate([chosen, np.repeat(chosen[:1], len(rays_cam) - len(chosen), axis=0)])
+            corners = np.concatenate(layout.target_corners)
+            kept = np.repeat(may_hit(corners.reshape(-1, 3, 3), chosen), 3)
+            dr.sync_thread()  # the last sample's cast through the target alone is done with its buffers
+            self._target_alone.fill(corners[kept], np.zeros((int(kept.sum()), 2)))
+            target = self._cast_scene("target", [self._target_alone])
+            t_tgt[behind] = cast_rays(target, [], rays, self._intersect)[0][: len(chosen)]
+        z_scale = rays_cam[:, 2]
+        depth = np.where(np.isfinite(t_all), t_all * z_scale, 0.0).reshape(H, W).astype(np.float32)
+        target_depth = np.where(np.isfinite(t_tgt), t_tgt * z_scale, 0.0).reshape(H, W).astype(np.float32)
+        instance = np.full(H * W, BACKGROUND_ID, np.int32)
+        instance[on_target] = TARGET_ID
+        for j, owners in enumerate(layout.owners):
+            on_mesh = idx_all == n_target + j
+            instance[on_mesh] = 2 + owners[prim[on_mesh]]
+        normal = np.where((np.sum(normal * rays_cam, axis=1) > 0)[:, None], -normal, normal)
+
+        sun = np.asarray(spec.sun.direction, np.float64)
+        sun_blocked = np.zeros(H * W, bool)
+        if layout.props and on_target.any():
+            origins = rays_cam[on_target] * t_all[on_target, None] + 1e-4 * normal[on_target]
+            props = self._cast_scene("props", list(self._prop_slots.values()))
+            sun_blocked[on_target] = _occluded(props, origins, sun)
+
+        return Buffers(
+            rgb=np.zeros((H, W, 3), np.uint8),
+            depth=depth,
+            instance=instance.reshape(H, W),
+            target_depth=target_depth,
+            normal=normal.reshape(H, W, 3).astype(np.float32),
+            sun_blocked=sun_blocked.reshape(H, W),
+        )
+
+    def _cast_scene(self, name: str, slots: list[MeshSlot]) -> mi.Scene:
+        """A scene of these slots (and the guard) for ray casts, kept from sample to sample under `name`
+        so that its casts replay frozen; its BVH rebuilt for the refilled slots."""
+        if name not in self._cast_scenes:
+            self._cast_scenes[name] = self._scene_of([slot.mesh for slot in slots])
+        else:
+            self._rebuild(self._cast_scenes[name])
+        return self._cast_scenes[name]
+
+    def _rebuild(self, scene: mi.Scene) -> None:
+        """Rebuild a kept scene's BVH for its slots' new triangles. The slots are written without telling
+        them (mitsuba_slots), so the guard is touched: a scene rebuilds when any of its shapes changed, and
+        another scene's rebuild marks the guard up to date again."""
+        self._guard.parameters_changed(["vertex_positions"])
+        scene.parameters_changed([])
+
+    def _scene_of(self, shapes: list[mi.Mesh]) -> mi.Scene:
+        """A scene of these meshes alone (and the guard), for ray casts."""
+        shapes = [*shapes, self._guard]
+        return mi.load_dict({"type": "scene", **{f"s{k:03d}": s for k, s in enumerate(shapes)}})
+
+    def _may_reach_target(self, spec: SceneSpec, rays: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Whether each ray (unit directions from the camera) meets the target's bounding sphere (about
+        its origin, 1 % wider) anywhere beyond distance t."""
+        centre = np.asarray(spec.target.t_vec, np.float64)
+        along = rays @ centre
+        gap2 = centre @ centre - along**2  # squared distance from the sphere's centre to the ray's line
+        return (gap2 <= self._reach**2) & (t <= along + np.sqrt(np.maximum(self._reach**2 - gap2, 0.0)))
+
+    def _scene(self, spec: SceneSpec, layout: SampleMeshes) -> mi.Scene:
+        """The path tracer's scene, holding every slot (filled for `spec`), the sun (and earthshine), the
+        render camera (scgen.render.camera.lens) and its film: built once per camera and Earth's light,
+        then given each sample's lights; its BVH is rebuilt for the refilled meshes."""
+        lights, camera = sample_lights(spec), render_camera(spec.camera)
+        key = (camera, tuple(lights))
+        if key not in self._scenes:
+            sensor = _sensor(camera, self.spp)
+            d = {"type": "scene", "integrator": {"type": "path", "max_depth": 4}, "sensor": sensor, **lights}
+            d.update({f"s{k:03d}": slot.mesh for k, slot in enumerate(self._slots())}, guard=self._guard)
+            scene = mi.load_dict(d)
+            self._scenes[key] = scene, SceneLights(scene, list(lights))
+        else:
+            self._rebuild(self._scenes[key][0])
+        scene, scene_lights = self._scenes[key]
+        scene_lights.set(lights, layout.extent)
+        return scene
+
+    def _shade(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> np.ndarray:
+        """The linear composite over the background, on the render camera (scgen.render.camera.lens)."""
+        img = np.asarray(self._render(spec, scene, layout), dtype=np.float32)
+        fg, alpha = img[..., :3], img[..., 3:4]
+        background = background_image(replace(spec, camera=render_camera(spec.camera)))
+        return fg + (1.0 - np.clip(alpha, 0, 1)) * background
+
+    def _intersect(self, scene: mi.Scene, d: mi.Vector3f) -> tuple:
+        """intersect_from_origin, replayed from a frozen recording: keyed by the meshes' capacities (their
+        buffers' addresses) and the ray count (never left to the recording's size inference)."""
+        return self._frozen_intersect(scene, d, capacities=self._capacities(), rays=dr.width(d))
+
+    def _slots(self) -> list[MeshSlot]:
+        """Every slot, the target's then the props'."""
+        return [*self._target_slots.values(), *self._prop_slots.values()]
+
+    def _capacities(self) -> tuple[int, ...]:
+        return tuple(s.capacity for s in self._slots())
+
+    def _render(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> mi.TensorXf:
+        """mi.render of `scene`, replayed from a frozen recording in a JIT variant. Its inputs name every
+        live object the recorded kernels call into (the other scenes' lights too) and, as plain values,
+        what the recording bakes in: the lights' bounding sphere and the meshes' capacities."""
+        if not dr.is_jit_v(mi.Float):
+            return mi.render(scene, seed=render_seed(spec))
+        others = [e for other, _ in self._scenes.values() if other is not scene for e in other.emitters()]
+        seed = dr.opaque(mi.UInt32, render_seed(spec))
+        return self._frozen_render(scene, seed, light_radius(layout.extent), self._capacities(), others)
+
+
+def _render_scene(
+    scene: mi.Scene, seed: mi.UInt32, radius: float, capacities: tuple, others: list
+) -> mi.TensorXf:
+    """mi.render, to be frozen: recorded once per distinct set of inputs, replayed after (see
+    MitsubaBackend._render)."""
+    return mi.render(scene, seed=seed)
+
+
+def _sensor(cam, spp: int) -> dict:
+    """The render camera as Mitsuba's perspective sensor, with its film and sampler."""
+    K = cam.K_mat
+    return {
+        "type": "perspective",
+        "fov": float(np.degrees(2 * np.arctan(cam.width / (2 * K[0, 0])))),
+        "fov_axis": "x",
+        "principal_point_offset_x": ((cam.width - 1) / 2 - K[0, 2]) / cam.width,
+        "principal_point_offset_y": ((cam.height - 1) / 2 - K[1, 2]) / cam.height,
+        "near_clip": CLIP_START_M,
+        "far_clip": CLIP_END_M,
+        "to_world": mi.ScalarTransform4f().scale([-1, -1, 1]),
+        "film": {
+            "type": "hdrfilm",
+            "width": cam.width,
+            "height": cam.height,
+            "pixel_format": "rgba",
+            "rfilter": {"type": "gaussian"},
+        },
+        "sampler": {"type": "independent", "sample_count": spp},
+    }
+
+
+def cast_rays(
+    scene: mi.Scene, shapes: list, dirs: np.ndarray, intersect: Callable | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ray length, index of the hit shape in `shapes` (-1 = miss), geometric normal and index of the hit
+    triangle in its shape, rays from the origin. `shapes`: meshes, or slots (whose meshes are known by
+    their registry ids); `intersect`: intersect_from_origin or a frozen one."""
+    if not dr.is_jit_v(mi.Float):
+        return _cast_rays_one_by_one(scene, [s.mesh if isinstance(s, MeshSlot) else s for s in shapes], dirs)
+    d = mi.Vector3f(*(mi.Float(aligned(dirs[:, k].astype(np.float32))) for k in range(3)))
+    t, hit_ids, nx, ny, nz, prim, valid = (
+        np.asarray(x) for x in (intersect or intersect_from_origin)(scene, d)
+    )
+    t = np.where(valid, t.astype(np.float64), np.inf)
+    idx = np.full(len(dirs), -1, np.int64)
+    if shapes:  # scene.shapes() is not in insertion order: map each hit's shape registry id to its index
+        ids = np.array([s.registry_id if isinstance(s, MeshSlot) else registry_id(s) for s in shapes])
+        hit_ids = hit_ids.astype(np.int64)
+        lut = np.full(max(int(ids.max()), int(hit_ids.max())) + 1, -1, np.int64)
+        lut[ids] = np.arange(len(shapes))
+        idx = np.where(valid, lut[hit_ids], -1)
+    n = np.stack([nx, ny, nz], 1).astype(np.float64)
+    return t, idx, np.where(valid[:, None], n, 0.0), np.where(valid, prim, 0).astype(np.int64)
+
+
+def intersect_from_origin(scene: mi.Scene, d: mi.Vector3f, **key: Any) -> tuple:
+    """The first hits of rays from the origin along `d`: length, hit shape's registry id, geometric normal
+    (x, y, z), triangle and whether there is one. `key`: what a frozen version is keyed by, unused here."""
+    si = scene.ray_intersect(mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), d))
+    shape_id = dr.reinterpret_array(mi.UInt32, si.shape)
+    return si.t, shape_id, si.n.x, si.n.y, si.n.z, si.prim_index, si.is_valid()
+
+
+def _cast_rays_one_by_one(
+    scene: mi.Scene, shapes: list, dirs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """cast_rays for scalar_rgb (the fallback without a usable libLLVM), whose rays go one at a time."""
+    index = {id(s): k for k, s in enumerate(shapes)}
+    t, idx, n = np.full(len(dirs), np.inf), np.full(len(dirs), -1, np.int64), np.zeros((len(dirs), 3))
+    prim = np.zeros(len(dirs), np.int64)
+    o = mi.Point3f(0.0, 0.0, 0.0)
+    for i, d in enumerate(dirs.tolist()):
+        si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(d)))
+        if si.is_valid():
+            t[i], idx[i], n[i], prim[i] = si.t, index.get(id(si.shape), -1), si.n, si.prim_index
+    return t, idx, n, prim
+
+
+def _occluded(scene: mi.Scene, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    if len(origins) == 0:
+        return np.zeros(0, bool)
+    if not dr.is_jit_v(mi.Float):  # scalar_rgb: one ray at a time
+        d = mi.Vector3f(direction.tolist())
+        return np.array([scene.ray_test(mi.Ray3f(mi.Point3f(o), d)) for o in origins.tolist()], bool)
+    ray = mi.Ray3f(
+        mi.Point3f(origins[:, 0], origins[:, 1], origins[:, 2]),
+        mi.Vector3f(*[np.full(len(origins), float(x)) for x in direction]),
+    )
+    return np.asarray(scene.ray_test(ray), bool)

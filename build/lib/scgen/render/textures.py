@@ -1,0 +1,49 @@
+"""Procedural texture primitives shared by the backgrounds: fractal noise and equirectangular look-ups."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def smooth_noise(rng: np.random.Generator, h: int, w: int, octaves: int = 5, base: int = 3) -> np.ndarray:
+    """Fractal value noise in [0, 1] (sum of bicubically upsampled random grids)."""
+    acc = np.zeros((h, w), np.float32)
+    amp = 1.0
+    for o in range(octaves):
+        n = base * 2**o
+        grid = rng.uniform(0, 1, (n + 1, n + 1)).astype(np.float32)
+        acc += amp * cv2.resize(grid, (w, h), interpolation=cv2.INTER_CUBIC)
+        amp *= 0.5
+    return (acc - acc.min()) / max(1e-6, float(acc.max() - acc.min()))
+
+
+def periodic_noise(rng: np.random.Generator, h: int, w: int, beta: float, aspect: float = 1.0) -> np.ndarray:
+    """Fractal noise with power spectrum 1/f^beta, periodic in both axes (FFT-filtered white noise).
+
+    Normalised to zero mean, unit standard deviation. `aspect` > 1 stretches features along x
+    (cloud bands). Periodic in x, so an equirectangular map of it has no seam at the date line.
+    """
+    fy = np.fft.fftfreq(h)[:, None]
+    fx = np.fft.rfftfreq(w)[None, :] * (h / w) * aspect
+    f = np.hypot(fx, fy)
+    f[0, 0] = 1.0
+    spectrum = np.fft.rfft2(rng.normal(size=(h, w))) / f ** (0.5 * beta)
+    spectrum[0, 0] = 0.0
+    out = np.fft.irfft2(spectrum, s=(h, w))
+    return (out / out.std()).astype(np.float32)
+
+
+def equirect(texture: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Bilinear look-up of an equirectangular map (rows: latitude +90..-90) at unit vectors q (N x 3)."""
+    h, w = texture.shape
+    lat = np.arcsin(np.clip(q[:, 2], -1, 1))
+    lon = np.arctan2(q[:, 1], q[:, 0])
+    x = (lon / (2 * np.pi) + 0.5) * w - 0.5
+    y = np.clip((0.5 - lat / np.pi) * (h - 1), 0, h - 1)
+    x0, y0 = np.floor(x).astype(np.int64), np.minimum(np.floor(y).astype(np.int64), h - 2)
+    fx, fy = x - x0, y - y0
+    x0, x1 = x0 % w, (x0 + 1) % w  # wraps at the date line
+    top = (1 - fx) * texture[y0, x0] + fx * texture[y0, x1]
+    bottom = (1 - fx) * texture[y0 + 1, x0] + fx * texture[y0 + 1, x1]
+    return (1 - fy) * top + fy * bottom

@@ -1,0 +1,237 @@
+"""Plan and run a render: validate everything, plan splits up front, render missing samples, finalize."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+import scgen
+from scgen.dataset.atomic import atomic_write_text, remove_stale_temporaries
+from scgen.dataset.bop import read_json
+from scgen.dataset.layout import FORMAT, MANIFEST, OBJ_ID, Layout, dumps
+from scgen.dataset.models import write_eval_model_dir, write_model_dir
+from scgen.dataset.splits import SPLITS, plan_splits, split_lists
+from scgen.dataset.writer import WriteOptions, dataset_depth_scale, existing_sample_ids, finalize
+from scgen.errors import ScgenError
+from scgen.generator import Generator
+from scgen.render.base import check_backend, renderer_threads
+from scgen.render.conventions import check_quality
+from scgen.run.executors import run_local, run_ray
+from scgen.run.parent_watch import spawn_pool
+from scgen.run.worker import Done, Task, WorkerSettings
+from scgen.scenes.factors import spec_key
+from scgen.scenes.spec import SceneSpec
+
+
+@dataclass
+class RenderJob:
+    """Everything `scgen render` was asked to do."""
+
+    out: Path
+    n: int
+    seed: int = 0
+    backend: str = "blender"
+    quality: str = "default"
+    device: str = "auto"
+    model_path: Path | None = None
+    keep_scale: bool = False
+    config_path: Path | None = None
+    camera: str | None = None  # camera preset (scgen.scenes.camera_config)
+    overrides: dict[str, Any] = field(default_factory=dict)
+    resolution: tuple[int, int] | None = None
+    split_by: str = "factors"
+    ratios: tuple[float, float, float] = (0.7, 0.1, 0.2)
+    shard: tuple[int, int] = (0, 1)
+    workers: int = 1
+    threads: int | None = None  # renderer threads per worker; None = the backend's (renderer_threads)
+    executor: str = "local"
+    ray_address: str | None = None
+    write: WriteOptions = field(default_factory=WriteOptions)
+
+
+@dataclass
+class Plan:
+    """The resolved inputs of a job: its generator (model, config), every SceneSpec and its split."""
+
+    generator: Generator
+    specs: list[SceneSpec]
+    splits: list[str]
+    keys: list[str]
+
+
+def validate_job(job: RenderJob) -> None:
+    """Checks that need no heavy work; raise ScgenError naming the bad value."""
+    if job.n <= 0:
+        raise ScgenError(f"--n must be a positive number of samples, got {job.n}")
+    check_backend(job.backend, job.device)  # the renderer can start here (builds none)
+    check_quality(job.quality)
+    if job.workers <= 0:
+        raise ScgenError(f"--workers must be positive, got {job.workers}")
+    if job.executor not in ("local", "ray"):
+        raise ScgenError(f"unknown executor '{job.executor}' (choose local or ray)")
+    i, count = job.shard
+    if count <= 0 or not 0 <= i < count:
+        raise ScgenError(f"--shard must be i/N with 0 <= i < N, got {i}/{count}")
+    if job.out.exists() and not job.out.is_dir():
+        raise ScgenError(f"output {job.out} exists and is not a directory")
+    if job.out.is_dir() and any(job.out.iterdir()) and not (job.out / MANIFEST).exists():
+        raise ScgenError(f"output {job.out} is a non-empty folder that is not an scgen dataset")
+    parent = job.out if job.out.exists() else existing_parent(job.out)
+    if not os.access(parent, os.W_OK):
+        raise ScgenError(f"output {job.out} is not writable")
+
+
+def existing_parent(p: Path) -> Path:
+    """`p`, or its nearest ancestor that exists (absolute)."""
+    p = p.absolute()
+    while not p.exists():
+        p = p.parent
+    return p
+
+
+def make_plan(job: RenderJob) -> Plan:
+    generator = Generator.load(
+        job.model_path, job.config_path, job.seed, job.resolution, job.keep_scale, job.overrides, job.camera,
+        backend=job.backend, quality=job.quality, device=job.device,
+        threads=renderer_threads(job.backend, job.workers, job.threads),
+    )  # fmt: skip
+    if job.write.rgb_format == "jpg" and generator.cfg["camera"]["output"]["bits"] != 8:
+        raise ScgenError("--rgb-format jpg holds 8 bits only: camera.output.bits is 16 (use png)")
+    specs = sample_all(generator, job.n, job.workers)
+    keys = [spec_key(s) for s in specs]
+    return Plan(generator, specs, plan_splits(keys, job.ratios, job.seed, job.split_by), keys)
+
+
+def _sample_range(args: tuple[Generator, range]) -> list[SceneSpec]:
+    generator, indices = args
+    return [generator.scene(i) for i in indices]
+
+
+def sample_all(generator: Generator, n: int, workers: int) -> list[SceneSpec]:
+    """Every SceneSpec of the job (needed up front for the split plan), in parallel when n is large."""
+    if workers <= 1 or n < 500:
+        return _sample_range((generator, range(n)))
+    step = -(-n // (4 * workers))
+    chunks = [(generator, range(a, min(n, a + step))) for a in range(0, n, step)]
+    with spawn_pool(workers) as pool:
+        return [spec for part in pool.map(_sample_range, chunks) for spec in part]
+
+
+def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:
+    """What identifies a dataset: a resume or a shard must match it exactly."""
+    cfg_text = json.dumps(plan.generator.cfg, sort_keys=True)
+    return {
+        "format": FORMAT,
+        "scgen_version": scgen.__version__,
+        "seed": job.seed,
+        "n": job.n,
+        "backend": job.backend,
+        "quality": job.quality,
+        "model": {"name": plan.generator.model.name, "fingerprint": plan.generator.model.fingerprint,
+                  "diameter_m": plan.generator.model.diameter},
+        "config_sha256": hashlib.sha256(cfg_text.encode()).hexdigest(),
+        "split_by": job.split_by,
+        "split_ratios": list(job.ratios),
+        "rgb_format": job.write.rgb_format,
+        "xyz_dtype": job.write.xyz_dtype,
+        "save_depth": job.write.save_depth,
+    }  # fmt: skip
+
+
+def write_static_files(layout: Layout, generator: Generator) -> None:
+    """The files every sample's writer reads: camera.json (with the dataset's depth scale), config.json,
+    the BOP models and the evaluation models."""
+    layout.root.mkdir(parents=True, exist_ok=True)
+    cam = generator.cfg["camera"]
+    depth_scale = dataset_depth_scale(generator.cfg, generator.model)
+    camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
+              "height": cam["height"], "depth_scale": depth_scale}  # fmt: skip
+    atomic_write_text(layout.camera_path, dumps(camera))
+    atomic_write_text(layout.root / "config.json", dumps(generator.cfg))
+    write_model_dir(generator.model, layout.models_dir, OBJ_ID)
+    write_eval_model_dir(generator.model, layout.models_eval_dir, OBJ_ID)
+
+
+def prepare_output(job: RenderJob, plan: Plan) -> Layout:
+    """Create the dataset folder and its static files, or check that an existing one matches."""
+    layout = Layout(job.out)
+    manifest = manifest_for(job, plan)
+    if layout.manifest_path.exists():
+        old = read_json(layout.manifest_path)
+        diff = sorted(k for k in manifest.keys() | old.keys() if manifest.get(k) != old.get(k))
+        if diff:
+            details = ", ".join(f"{k}: {old.get(k)!r} on disk vs {manifest.get(k)!r} now" for k in diff)
+            raise ScgenError(
+                f"refusing to resume into {job.out}: it was made with different settings ({details})"
+            )
+        remove_stale_temporaries(layout.root)
+        return layout
+    write_static_files(layout, plan.generator)
+    atomic_write_text(
+        layout.splits_path,
+        dumps({"split_by": job.split_by, "ratios": list(job.ratios), "seed": job.seed,
+               "splits": split_lists(plan.splits), "keys": {str(i): k for i, k in enumerate(plan.keys)}}),
+    )  # fmt: skip
+    atomic_write_text(layout.manifest_path, dumps(manifest))  # last: its presence marks a dataset
+    return layout
+
+
+def shard_indices(n: int, shard: tuple[int, int]) -> list[int]:
+    """Indices of shard i of N: every N-th index starting at i (balances cheap and costly samples)."""
+    i, count = shard
+    return list(range(i, n, count))
+
+
+def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
+    """Render the job's missing samples and finalize; returns a summary with timings: plan_s (sampling
+    every SceneSpec, the split plan, the static files), render_wall_s, finalize_s, and the workers'
+    summed render_s/other_s."""
+    t_plan = time.perf_counter()
+    validate_job(job)
+    plan = make_plan(job)
+    layout = prepare_output(job, plan)
+    done = existing_sample_ids(layout)
+    tasks = [
+        Task(i, plan.splits[i], plan.specs[i].to_dict())
+        for i in shard_indices(job.n, job.shard)
+        if i not in done
+    ]
+    settings = WorkerSettings(plan.generator, job.out, job.write)
+    timings = {"plan_s": time.perf_counter() - t_plan, "render_s": 0.0, "other_s": 0.0}
+    bar = tqdm(
+        total=len(tasks), unit="img", disable=not progress, file=sys.stderr, desc="render", smoothing=0.1
+    )
+
+    def on_done(d: Done) -> None:
+        timings["render_s"] += d.render_s
+        timings["other_s"] += d.other_s
+        bar.update(1)
+
+    t0 = time.perf_counter()
+    try:
+        if job.executor == "ray":
+            gpus = 1.0 if job.device == "gpu" else 0.0
+            run_ray(tasks, settings, job.workers, job.ray_address, gpus, on_done)
+        else:
+            run_local(tasks, settings, job.workers, on_done)
+    finally:
+        bar.close()
+        timings["render_wall_s"] = time.perf_counter() - t0
+        n_done = finalize(layout)  # whatever is complete stays usable, even after a failure
+        timings["finalize_s"] = time.perf_counter() - t0 - timings["render_wall_s"]
+    return {
+        "rendered": len(tasks),
+        "skipped": len(done),
+        "complete": n_done,
+        "total_s": time.perf_counter() - t0,
+        **timings,
+        "splits": {s: plan.splits.count(s) for s in SPLITS},
+    }

@@ -1,0 +1,161 @@
+"""The camera table of the sampling config: intrinsics, lens, exposure, optics, glare, sensor, output.
+
+One table of presets (`CAMERA_PRESETS`): each entry overrides the `default` camera, which is the
+config's built-in `camera` section. Every key carries a physical unit in its name or in
+docs/config.md; ranges are [min, max] drawn uniformly per image (the gain log-uniformly).
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+from scgen.errors import ScgenError
+from scgen.scenes.checks import check_choice, check_positive, check_prob, check_range
+
+DEFAULT_CAMERA: dict[str, Any] = {
+    "preset": "default",
+    "width": 640,
+    "height": 480,
+    "fx": 600.0,
+    "fy": 600.0,
+    "cx": None,  # None: (width - 1) / 2, the image centre under the pixel-centre convention
+    "cy": None,
+    "dist": [0.0, 0.0, 0.0, 0.0, 0.0],  # OpenCV k1, k2, p1, p2, k3 (normalised coordinates)
+    "exposure_ev": 0.0,  # base exposure (EV); +1 EV halves every image value
+    "exposure": {
+        "mode": "range",  # fixed | range | auto
+        "ev_range": [-0.5, 0.5],  # range: EV added per image
+        "auto_target": 0.18,  # auto: mean linear value of the target's visible pixels
+        "auto_limits_ev": [-6.0, 6.0],  # auto: the EV it may add
+    },
+    "optics": {
+        "psf": "gaussian",  # gaussian | defocus (a uniform disc)
+        "psf_fwhm_px": [0.7, 1.6],  # FWHM of the PSF (a disc's diameter), px
+        "motion_blur_prob": 0.3,
+        "motion_blur_px": [1.0, 4.0],  # line length, px; direction uniform
+        "vignetting": [0.0, 0.25],  # share of light lost at the farthest image corner
+        "chromatic_px": [0.0, 0.4],  # lateral colour: red/blue shift at the farthest corner, px
+    },
+    "glare": {
+        "blooming": True,  # charge above full well spills along sensor columns
+        "bloom": 0.02,  # share of light above saturation scattered into the wide PSF
+        "bloom_radius_px": 40.0,  # half-width of the wide PSF, px
+        "spikes": 6,  # diffraction spikes of the wide PSF (0: none)
+        "flare": True,  # ghosts and veiling glare from the sun in or near the field of view
+        "flare_ghosts": [3, 7],
+        "ghost_share": [1e-5, 3e-4],  # light in each ghost, as a share of the sun's light on the sensor
+        "veiling_glare": 0.005,  # share of the sun's light on the sensor scattered over the image
+    },
+    "sensor": {
+        "enabled": True,
+        "full_well_e": 10500.0,  # e-
+        "full_well_value": 1.0,  # linear image value that fills the well at gain 1
+        "gain": [1.0, 16.0],  # analog gain per image (log-uniform): the noise level
+        "read_noise_e": 2.5,  # e- rms
+        "dark_current_e_s": 25.0,  # e-/s per pixel
+        "exposure_time_s": 0.01,
+        "prnu": 0.01,  # photo-response non-uniformity, rms share; fixed per dataset
+        "hot_pixel_frac": 1e-4,  # fixed per dataset
+        "hot_pixel_e_s": 2e4,  # dark current of a hot pixel, e-/s
+        "dead_pixel_frac": 5e-5,  # fixed per dataset
+        "adc_bits": 12,
+    },
+    "output": {
+        "mono": False,  # one-channel images (luminance), as SPEED/SPEED+
+        "bits": 8,  # 8 or 16 (PNG only)
+        "curve": "srgb",  # srgb | linear
+        "jpeg_quality": [85, 95],  # with --rgb-format jpg, drawn per image
+    },
+}
+
+CAMERA_PRESETS: dict[str, dict[str, Any]] = {
+    "ideal": {  # the images before the camera stage: a perfect pinhole camera at a fixed exposure
+        "exposure": {"mode": "fixed"},
+        "optics": {
+            "psf_fwhm_px": [0.0, 0.0],
+            "motion_blur_prob": 0.0,
+            "vignetting": [0.0, 0.0],
+            "chromatic_px": [0.0, 0.0],
+        },  # fmt: skip
+        "glare": {"blooming": False, "bloom": 0.0, "flare": False},
+        "sensor": {"enabled": False},
+        "output": {"jpeg_quality": [95, 95]},
+    },
+    "default": {},  # a machine-vision camera at scgen's historical 640x480, 56 deg field of view
+    "speedplus": {  # SPEED+'s camera (1920x1200, calibrated K and distortion, monochrome), IMX174-like sensor
+        "width": 1920,
+        "height": 1200,
+        "fx": 2988.5795,
+        "fy": 2988.3401,
+        "cx": 960.0,
+        "cy": 600.0,
+        "dist": [-0.22383, 0.51410, -0.00066, -0.00021, -0.13124],
+        "optics": {"psf_fwhm_px": [1.8, 2.8], "motion_blur_px": [1.0, 6.0], "chromatic_px": [0.0, 0.0]},
+        "sensor": {"full_well_e": 32000.0, "read_noise_e": 7.0, "gain": [1.0, 8.0]},
+        "output": {"mono": True, "jpeg_quality": [80, 95]},
+    },
+}
+PX_RANGES = (("optics", "psf_fwhm_px"), ("optics", "motion_blur_px"), ("optics", "chromatic_px"))
+
+
+def camera_preset(name: str) -> dict[str, Any]:
+    """The full camera table of a preset (a deep copy of the default with the preset's entry over it)."""
+    if name not in CAMERA_PRESETS:
+        raise ScgenError(f"unknown camera preset '{name}' (choose from {', '.join(CAMERA_PRESETS)})")
+    table = copy.deepcopy(DEFAULT_CAMERA)
+    for key, value in CAMERA_PRESETS[name].items():
+        if isinstance(value, dict):
+            table[key].update(copy.deepcopy(value))
+        else:
+            table[key] = copy.deepcopy(value)
+    table["preset"] = name
+    return table
+
+
+def scale_pixel_sizes(camera: dict[str, Any], s: float) -> None:
+    """Scale the optics' pixel-sized ranges with the image (a resolution change keeps the optics)."""
+    for section, key in PX_RANGES:
+        camera[section][key] = [x * s for x in camera[section][key]]
+
+
+def check_camera(cam: dict[str, Any]) -> None:
+    """Every range and choice of the camera table (intrinsics are checked by config.resolve)."""
+    if len(cam["dist"]) != 5 or not all(isinstance(k, (int, float)) for k in cam["dist"]):
+        raise ScgenError(f"camera.dist must be 5 numbers (k1, k2, p1, p2, k3), got {cam['dist']!r}")
+    check_choice("camera.exposure.mode", cam["exposure"]["mode"], ("fixed", "range", "auto"))
+    check_choice("camera.optics.psf", cam["optics"]["psf"], ("gaussian", "defocus"))
+    check_choice("camera.output.curve", cam["output"]["curve"], ("srgb", "linear"))
+    check_choice("camera.output.bits", cam["output"]["bits"], (8, 16))
+    check_range("camera.exposure.ev_range", cam["exposure"]["ev_range"], -30.0)
+    check_range("camera.exposure.auto_limits_ev", cam["exposure"]["auto_limits_ev"], -30.0)
+    check_positive("camera.exposure.auto_target", cam["exposure"]["auto_target"])
+    for key in ("psf_fwhm_px", "motion_blur_px", "chromatic_px"):
+        check_range(f"camera.optics.{key}", cam["optics"][key], 0.0)
+    check_range("camera.optics.vignetting", cam["optics"]["vignetting"], 0.0)
+    if cam["optics"]["vignetting"][1] >= 1.0:
+        raise ScgenError(f"camera.optics.vignetting must stay below 1, got {cam['optics']['vignetting']}")
+    check_prob("camera.optics.motion_blur_prob", cam["optics"]["motion_blur_prob"])
+    glare = cam["glare"]
+    check_prob("camera.glare.bloom", glare["bloom"])
+    check_positive("camera.glare.bloom_radius_px", glare["bloom_radius_px"])
+    if not isinstance(glare["spikes"], int) or glare["spikes"] < 0:
+        raise ScgenError(f"camera.glare.spikes must be a whole number >= 0, got {glare['spikes']!r}")
+    check_range("camera.glare.flare_ghosts", glare["flare_ghosts"], 0)
+    check_range("camera.glare.ghost_share", glare["ghost_share"], 0.0)
+    check_prob("camera.glare.veiling_glare", glare["veiling_glare"])
+    sensor = cam["sensor"]
+    for key in ("full_well_e", "full_well_value", "exposure_time_s"):
+        check_positive(f"camera.sensor.{key}", sensor[key])
+    for key in ("read_noise_e", "dark_current_e_s", "prnu", "hot_pixel_e_s"):
+        if sensor[key] < 0:
+            raise ScgenError(f"camera.sensor.{key} must be >= 0, got {sensor[key]}")
+    check_range("camera.sensor.gain", sensor["gain"], 1e-6)
+    for key in ("hot_pixel_frac", "dead_pixel_frac"):
+        check_prob(f"camera.sensor.{key}", sensor[key])
+    if sensor["adc_bits"] not in range(8, 17):
+        raise ScgenError(f"camera.sensor.adc_bits must be 8..16, got {sensor['adc_bits']!r}")
+    q = cam["output"]["jpeg_quality"]
+    check_range("camera.output.jpeg_quality", q, 1)
+    if q[1] > 100:
+        raise ScgenError(f"camera.output.jpeg_quality must lie in [1, 100], got {q}")

@@ -1,0 +1,33 @@
+"""Range and choice checks of config values: one line naming the key and the bad value."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from scgen.errors import ScgenError
+
+
+def is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def check_range(name: str, value: Any, low: float) -> None:
+    """[min, max] with low <= min <= max."""
+    ok = isinstance(value, (list, tuple)) and len(value) == 2 and all(map(is_number, value))
+    if not ok or not (low <= value[0] <= value[1]):
+        raise ScgenError(f"{name} must be [min, max] with {low} <= min <= max, got {value!r}")
+
+
+def check_prob(name: str, p: Any) -> None:
+    if not is_number(p) or not 0.0 <= p <= 1.0:
+        raise ScgenError(f"{name} must be a probability in [0, 1], got {p!r}")
+
+
+def check_positive(name: str, value: Any) -> None:
+    if not is_number(value) or value <= 0:
+        raise ScgenError(f"{name} must be positive, got {value!r}")
+
+
+def check_choice(name: str, value: Any, allowed: tuple[Any, ...]) -> None:
+    if value not in allowed:
+        raise ScgenError(f"{name} must be one of {', '.join(map(str, allowed))}, got {value!r}")
