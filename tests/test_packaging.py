@@ -9,8 +9,8 @@ sees no bpy, Mitsuba or drjit, a rendering node no torch stack. scgen itself com
 from __future__ import annotations
 
 import email
+import importlib.metadata
 import os
-import re
 import shutil
 import subprocess
 import sys
@@ -21,10 +21,10 @@ from pathlib import Path
 
 import pytest
 from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 from posenet_helpers import posenet_dataset
 from test_scale_out import assert_same_dataset
 
-from posenet.console import TRAINING_MODULES
 from scgen.render.base import MITSUBA_MISSING
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,7 +33,6 @@ SOURCE_ONLY = shutil.ignore_patterns(
 )
 MODEL = {f"scgen/assets/spacecraft/{f}" for f in ("parts.glb", "obj_000001.ply", "models_info.json")}
 RENDERERS = ("bpy", "mitsuba", "drjit")
-TRAINING_STACK = (*TRAINING_MODULES, "functorch", "torchgen", "onnx", "onnxruntime", "onnxscript")
 SMALL_RENDER = ("--backend", "mitsuba", "--resolution", "64x48", "--quality", "draft", "--quiet")
 
 
@@ -61,17 +60,20 @@ def dist(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return {"sdist": sdist, "wheel": wheel}
 
 
-def fresh_venv(where: Path, wheel: Path, leave_out: tuple[str, ...] = ()) -> Path:
-    """A venv at `where` holding the wheel and, through a folder of links, this interpreter's third-party
-    packages except scgen's own entries and the distributions named in `leave_out`; its bin folder."""
+def fresh_venv(where: Path, wheel: Path, extras: str) -> Path:
+    """A venv at `where` holding the wheel and, through a folder of links, exactly the installed
+    distributions that `pip install 'WHEEL[extras]'` would pull in (the wheel's requirements and theirs,
+    extras and markers evaluated): a dependency the wheel forgets to declare is missing there, as on a
+    user's machine. Its bin folder."""
     run(sys.executable, "-m", "venv", "--without-pip", where, cwd=where.parent)
     deps = where / "deps"
     deps.mkdir()
     site = Path(sysconfig.get_paths()["purelib"])
-    for entry in site.iterdir():
-        top = re.split(r"[-.]", entry.name)[0].lower()
-        if top not in ("scgen", "__editable__", "__pycache__", *leave_out):
-            (deps / entry.name).symlink_to(entry)
+    for name in installed_closure(requirements(wheel, extras)):
+        files = importlib.metadata.distribution(name).files or []
+        for top in {f.parts[0] for f in files} - {"..", "__pycache__"}:
+            if not (deps / top).exists():
+                (deps / top).symlink_to(site / top)
     (venv_site,) = where.glob("lib/python3*/site-packages")
     (venv_site / "deps.pth").write_text(f"{deps}\n")
     pip = (sys.executable, "-m", "pip", "--python", where / "bin" / "python")
@@ -79,21 +81,44 @@ def fresh_venv(where: Path, wheel: Path, leave_out: tuple[str, ...] = ()) -> Pat
     return where / "bin"
 
 
-def requirements(wheel: Path, extra: str) -> list[Requirement]:
-    """What installing the wheel with `extra` pulls in: the base requirements and the extra's, with the
-    extras it names (scgen[...]) expanded."""
+def installed_closure(requirements: list[Requirement]) -> set[str]:
+    """The names of the installed distributions these requirements pull in, transitively."""
+    found: set[str] = set()
+    todo = list(requirements)
+    while todo:
+        req = todo.pop()
+        name = canonicalize_name(req.name)
+        if name in found:
+            continue
+        try:
+            dist = importlib.metadata.distribution(name)
+        except importlib.metadata.PackageNotFoundError:
+            pytest.fail(f"{name} (required) is not installed here: run make install")
+        found.add(name)
+        extras = {"", *req.extras}
+        for text in dist.requires or []:
+            sub = Requirement(text)
+            if sub.marker is None or any(sub.marker.evaluate({"extra": e}) for e in extras):
+                todo.append(sub)
+    return found
+
+
+def requirements(wheel: Path, extras: str) -> list[Requirement]:
+    """What installing the wheel with `extras` ("a,b") asks for: the base requirements and the extras',
+    with the extras they name (scgen[...]) expanded."""
     with zipfile.ZipFile(wheel) as z:
         meta = email.message_from_bytes(z.read(next(n for n in z.namelist() if n.endswith("/METADATA"))))
     reqs = [Requirement(r) for r in meta.get_all("Requires-Dist")]
 
-    def wanted(r: Requirement, extras: set[str]) -> bool:
-        return r.marker is None or any(r.marker.evaluate({"extra": e}) for e in extras)
+    def wanted(r: Requirement, chosen: set[str]) -> bool:
+        return r.marker is None or any(r.marker.evaluate({"extra": e}) for e in chosen)
 
-    extras, todo = set(), [extra]
+    chosen: set[str] = set()
+    todo = extras.split(",")
     while todo:
-        extras.add(todo.pop())
-        todo += [e for r in reqs if r.name == "scgen" and wanted(r, extras) for e in r.extras - extras]
-    return [r for r in reqs if r.name != "scgen" and wanted(r, extras)]
+        chosen.add(todo.pop())
+        todo += [e for r in reqs if r.name == "scgen" and wanted(r, chosen) for e in r.extras - chosen]
+    return [r for r in reqs if r.name != "scgen" and wanted(r, chosen)]
 
 
 def test_the_sdist_and_the_wheel_built_from_it_carry_the_bundled_model(dist: dict[str, Path]) -> None:
@@ -119,7 +144,7 @@ def test_each_extra_installs_only_its_job(dist: dict[str, Path]) -> None:
 def test_a_full_install_renders_validates_and_trains_from_another_directory(
     dist: dict[str, Path], tmp_path: Path
 ) -> None:
-    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"])
+    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], "all")
     work = tmp_path / "work"
     work.mkdir()
     code = "import scgen, posenet; print(scgen.__file__, posenet.__file__)"
@@ -140,7 +165,7 @@ def test_a_training_install_trains_and_evaluates_without_a_renderer(
     dist: dict[str, Path], tmp_path: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
     data = posenet_dataset(tmp_path_factory)
-    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], leave_out=RENDERERS)
+    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], "train")
     work = tmp_path / "work"
     work.mkdir()
     for module in RENDERERS:
@@ -159,7 +184,7 @@ def test_a_training_install_trains_and_evaluates_without_a_renderer(
 def test_a_rendering_install_renders_without_torch_and_says_what_posenet_needs(
     dist: dict[str, Path], tmp_path: Path
 ) -> None:
-    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], leave_out=TRAINING_STACK)
+    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], "render")
     work = tmp_path / "work"
     work.mkdir()
     run(bin_ / "python", "-c", "import torch", cwd=work, ok=False)
@@ -175,7 +200,7 @@ def test_ray_workers_running_the_installed_wheel_equal_a_local_run(
 ) -> None:
     """A shared install: the Ray driver and its workers run the venv's wheel (no checkout on any path)."""
     pytest.importorskip("ray")
-    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"])
+    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], "render,ray")
     work = tmp_path / "work"
     work.mkdir()
     common = (*SMALL_RENDER, "--n", "4", "--seed", "3")
