@@ -12,6 +12,7 @@ from typing import Any
 import click
 
 from scgen.errors import ScgenError
+from scgen.scenes.camera_config import CAMERA_PRESETS
 from scgen.scenes.factors import FACTOR_GROUPS
 
 
@@ -64,8 +65,8 @@ def scene_options(command: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,
                      help="TOML/YAML file overriding any sampling distribution (see docs/config.md)."),
         click.option("--camera", "camera", default=None,
-                     help="Camera preset: ideal | default | speedplus (default: the config's camera.preset, "
-                          "else default). The config's camera table overrides it key by key."),
+                     help=f"Camera preset: {' | '.join(CAMERA_PRESETS)} (default: the config's "
+                          "camera.preset, else default). The config's camera table overrides it key by key."),
     ]  # fmt: skip
     for option in reversed(options):
         command = option(command)

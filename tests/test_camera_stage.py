@@ -17,7 +17,7 @@ from scgen.render.camera import glare, optics
 from scgen.render.camera.characterise import photon_transfer
 from scgen.render.camera.exposure import exposure_shift_ev, luminance
 from scgen.render.camera.lens import render_camera, to_camera
-from scgen.render.camera.sensor import bloom_columns, conversion_gain, shot_noise
+from scgen.render.camera.sensor import bloom_columns, conversion_gain, expose, shot_noise
 from scgen.scenes import load_config
 from scgen.scenes.camera_config import camera_preset
 from scgen.scenes.lens import distort, undistort
@@ -99,6 +99,51 @@ def test_auto_exposure_brings_the_visible_target_to_its_target_value():
     ev = exposure_shift_ev(exposure, 0.0, img, visible)
     shown = img * 2.0 ** (-ev)
     assert luminance(shown)[visible].mean() == pytest.approx(exposure["auto_target"], rel=1e-5)
+
+
+@pytest.mark.parametrize("mode", ["range", "auto"])
+def test_highlight_protection_shortens_the_exposure_just_enough_that_at_most_the_limit_clips(mode: str):
+    """A frame whose bright tenth (an Earth under a strong sun) would clip: the exposure is shortened until
+    at most `max_clipped` of its pixels clip, and no further (a hundredth of an EV less clips more)."""
+    exposure = dict(camera_preset("default")["exposure"], mode=mode)
+    rng = np.random.default_rng(3)
+    img = rng.uniform(0.05, 0.4, (120, 160, 3)).astype(np.float32)
+    img[:12] = rng.uniform(1.5, 4.0, (12, 160, 3))  # 10 % of the frame, up to 2 EV over
+    visible = np.zeros((120, 160), bool)
+    visible[50:70, 70:90] = True
+
+    def clipped(ev: float) -> float:
+        return float(((img * 2.0 ** (-ev)).max(axis=-1) >= 1.0).mean())
+
+    ev = exposure_shift_ev(exposure, 0.0, img, visible)
+    assert clipped(ev) <= exposure["max_clipped"] < clipped(ev - 0.01)
+    dim = np.full_like(img, 0.05)  # nothing clips at the metered or drawn exposure: it stands
+    assert exposure_shift_ev(exposure, 0.3, dim, visible) == exposure_shift_ev(
+        dict(exposure, max_clipped=1.0), 0.3, dim, visible
+    )
+    assert exposure_shift_ev(dict(exposure, mode="fixed"), 0.0, img, visible) == 0.0  # fixed: as set
+
+
+@pytest.mark.parametrize("preset", ["default", "ccd"])
+def test_a_saturated_disc_stays_a_disc_on_the_default_sensor_and_spills_along_columns_on_the_ccd(preset: str):
+    """The default camera's sensor drains charge above the full well (anti-blooming): only the disc
+    saturates. The CCD preset's wells spill along their columns: straight streaks above and below the
+    disc, exactly as wide as it, conserving the charge up to the sensor's edges."""
+    camera = camera_preset(preset)
+    sensor = dict(camera["sensor"], hot_pixel_frac=0.0, dead_pixel_frac=0.0)
+    value = np.full((200, 120, 1), 0.1, np.float32)
+    y, x = np.mgrid[0:200, 0:120]
+    disc = (y - 100) ** 2 + (x - 60) ** 2 <= 6**2
+    value[disc] = 30.0  # 30 wells of charge per disc pixel
+    out = expose(value, sensor, 1.0, camera["glare"]["blooming"], 0, np.random.default_rng(0))[..., 0]
+    saturated = out > 0.99  # a full well reads the top code give or take its read noise
+    if preset == "default":
+        assert np.array_equal(saturated, disc)
+        return
+    columns = np.nonzero(disc.any(axis=0))[0]
+    assert not saturated[:, : columns[0]].any() and not saturated[:, columns[-1] + 1 :].any()
+    streak = saturated[:, columns].sum(axis=0)
+    assert (streak > 3 * disc[:, columns].sum(axis=0)).all()  # each column well past the disc's chord
 
 
 def test_lens_round_trip_is_exact():

@@ -30,7 +30,7 @@ def generator(finish: dict, backend: str = "mitsuba", seed: int = 5) -> Generato
 
 
 def test_draws_stay_in_their_documented_ranges_and_swap_at_their_rate():
-    cfg = {"mode": "varied", "swap_prob": 0.25, "jitter": 1.0}
+    cfg = {"mode": "varied", "swap_prob": 0.25, "jitter": 1.0, "nominal_prob": 0.0}
     draws = [sample_finish(factor_rng(1, i, "finish"), cfg) for i in range(400)]
     assert draws[7] == sample_finish(factor_rng(1, 7, "finish"), cfg)  # a pure function of (seed, sample)
     swaps = np.mean([f["material"] != cls for d in draws for cls, f in d.items()])
@@ -49,6 +49,15 @@ def test_draws_stay_in_their_documented_ranges_and_swap_at_their_rate():
     unjittered = sample_finish(factor_rng(1, 0, "finish"), {**cfg, "swap_prob": 0.0, "jitter": 0.0})
     assert all(finished(unjittered, cls) == MATERIALS[cls] for cls in MATERIALS)
     assert sample_finish(factor_rng(1, 0, "finish"), {**cfg, "mode": "nominal"}) == {}
+
+
+def test_a_share_of_varied_samples_keeps_the_nominal_finish_and_moves_no_other_draw():
+    cfg = {"mode": "varied", "swap_prob": 0.25, "jitter": 1.0, "nominal_prob": 0.0}
+    never = [sample_finish(factor_rng(2, i, "finish"), cfg) for i in range(2000)]
+    some = [sample_finish(factor_rng(2, i, "finish"), {**cfg, "nominal_prob": 0.05}) for i in range(2000)]
+    nominal = sum(s == {} for s in some)
+    assert abs(nominal - 100) < 3.5 * np.sqrt(2000 * 0.05 * 0.95)  # binomial(2000, 0.05)
+    assert all(s == n for s, n in zip(some, never, strict=True) if s)  # every other sample as it was
 
 
 def test_varied_finish_changes_the_target_and_nothing_else():
@@ -121,4 +130,4 @@ def test_stats_groups_samples_by_finish(tmp_path):
         for group, n in split["factors"]["finish"].items():
             counts[group] = counts.get(group, 0) + n
     assert counts == {g: groups.count(g) for g in ("nominal", "varied", "swapped")}
-    assert counts["nominal"] == 0 and counts["varied"] + counts["swapped"] == 6
+    assert sum(counts.values()) == 6 and counts["varied"] + counts["swapped"] > 0

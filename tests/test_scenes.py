@@ -9,6 +9,7 @@ import pytest
 
 from scgen.errors import ScgenError
 from scgen.generator import Generator
+from scgen.render.camera.glare import FLARE_REACH_RAD, sun_view
 from scgen.scenes import SceneSpec, load_config
 from scgen.scenes.config import distance_range_m
 
@@ -88,3 +89,30 @@ def test_config_file_toml_and_yaml(tmp_path):
     (tmp_path / "c.yaml").write_text("shadow:\n  caster_prob: 0.0\n")
     assert load_config(tmp_path / "c.toml")["shadow"]["caster_prob"] == 1.0
     assert load_config(tmp_path / "c.yaml")["shadow"]["caster_prob"] == 0.0
+
+
+def test_the_sun_is_drawn_near_the_view_for_a_share_of_the_samples_without_a_caster(spacecraft):
+    """From its own stream, for ~sun_near_view.prob of the samples without a shadow caster, the sun moves
+    to where its image falls in or near the frame: within the lens' flare reach, rendered as a flare.
+    Nothing a label depends on moves: pose, camera, occluders, casters and clutter are those drawn
+    without it, and samples with a caster keep their sun."""
+    cfg = load_config()
+    off = load_config(overrides={"illumination": {"sun_near_view": {"prob": 0.0}}})
+    near, plain = Generator(spacecraft, cfg, 21), Generator(spacecraft, off, 21)
+    moved = []
+    for i in range(800):
+        a, b = near.scene(i), plain.scene(i)
+        assert (a.target, a.camera, a.props, a.requested_occlusion) == (b.target, b.camera, b.props,
+                                                                        b.requested_occlusion)  # fmt: skip
+        if a.sun != b.sun:
+            assert not a.shadow_caster and a.sun.level == b.sun.level
+            view = sun_view(a.camera, np.asarray(a.sun.direction))
+            assert view is not None and view.off_view_rad < FLARE_REACH_RAD
+            moved.append(i)
+    no_caster = sum(not plain.scene(i).shadow_caster for i in range(800))
+    expected = cfg["illumination"]["sun_near_view"]["prob"] * no_caster
+    assert abs(len(moved) - expected) < 3.5 * np.sqrt(expected), (len(moved), expected)
+    with Generator(spacecraft, load_config(resolution=(96, 72)), 21, backend="mitsuba",
+                   quality="draft") as renderer:  # fmt: skip
+        flared = [renderer.sample(i).buffers.camera.flare for i in moved[:2]]
+    assert flared == [True, True]

@@ -27,7 +27,10 @@ DEFAULT_CAMERA: dict[str, Any] = {
         "mode": "range",  # fixed | range | auto
         "ev_range": [-0.5, 0.5],  # range: EV added per image
         "auto_target": 0.18,  # auto: mean linear value of the target's visible pixels
-        "auto_limits_ev": [-6.0, 6.0],  # auto: the EV it may add
+        "auto_limits_ev": [-6.0, 6.0],  # auto: the EV it may add; the upper end caps highlight protection
+        # range and auto: highlight protection, as a camera's auto-exposure does it: the exposure is shortened
+        # (EV raised) until at most this share of the frame's pixels clips (scgen.render.camera.exposure)
+        "max_clipped": 0.01,
     },
     "optics": {
         "psf": "gaussian",  # gaussian | defocus (a uniform disc)
@@ -38,7 +41,7 @@ DEFAULT_CAMERA: dict[str, Any] = {
         "chromatic_px": [0.0, 0.4],  # lateral colour: red/blue shift at the farthest corner, px
     },
     "glare": {
-        "blooming": True,  # charge above full well spills along sensor columns
+        "blooming": False,  # true: charge above the full well spills along columns (CCD, no anti-blooming)
         "bloom": 0.02,  # share of light above saturation scattered into the wide PSF
         "bloom_radius_px": 40.0,  # half-width of the wide PSF, px
         "spikes": 6,  # diffraction spikes of the wide PSF (0: none)
@@ -82,7 +85,10 @@ CAMERA_PRESETS: dict[str, dict[str, Any]] = {
         "sensor": {"enabled": False},
         "output": {"jpeg_quality": [95, 95]},
     },
-    "default": {},  # a machine-vision camera at scgen's historical 640x480, 56 deg field of view
+    "default": {},  # a machine-vision CMOS camera (anti-blooming drains) at 640x480, 56 deg field of view
+    "ccd": {  # the default camera on a CCD without anti-blooming drains: full wells spill along columns
+        "glare": {"blooming": True},
+    },
     "speedplus": {  # SPEED+'s camera (1920x1200, calibrated K and distortion, monochrome), IMX174-like sensor
         "width": 1920,
         "height": 1200,
@@ -130,6 +136,7 @@ def check_camera(cam: dict[str, Any]) -> None:
     check_range("camera.exposure.ev_range", cam["exposure"]["ev_range"], -30.0)
     check_range("camera.exposure.auto_limits_ev", cam["exposure"]["auto_limits_ev"], -30.0)
     check_positive("camera.exposure.auto_target", cam["exposure"]["auto_target"])
+    check_prob("camera.exposure.max_clipped", cam["exposure"]["max_clipped"])
     for key in ("psf_fwhm_px", "motion_blur_px", "chromatic_px"):
         check_range(f"camera.optics.{key}", cam["optics"][key], 0.0)
     check_range("camera.optics.vignetting", cam["optics"]["vignetting"], 0.0)

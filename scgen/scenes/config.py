@@ -54,6 +54,10 @@ DEFAULT_CONFIG: dict[str, Any] = {
         "probs": {"weak": 1 / 3, "normal": 1 / 3, "strong": 1 / 3},
         # largest sun phase angle (sun direction vs. direction to the camera), degrees
         "max_phase_deg": 75.0,
+        # the sun in or near the field of view, behind the target (where the lens flares): for this share of
+        # the samples without a shadow caster, drawn from its own stream, the sun's image falls uniformly over
+        # the frame widened by `margin` of its width and height on every side (a quarter in view at 0.5)
+        "sun_near_view": {"prob": 0.05, "margin": 0.5},
     },
     "shadow": {
         "caster_prob": 0.55,
@@ -86,6 +90,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
         "mode": "varied",  # or nominal: every part keeps its class's finish (scgen.scenes.finish)
         "swap_prob": 0.1,  # per material class: becomes another class
         "jitter": 1.0,  # share of scgen.scenes.materials.FINISH_RANGES used (0: nominal values)
+        "nominal_prob": 0.05,  # varied mode: the share of samples whose parts all keep their nominal finish
     },
     "occluders": {
         "group_probs": {"none": 0.25, "slight": 0.25, "moderate": 0.25, "heavy": 0.25},
@@ -267,6 +272,10 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
     _check_finish(cfg["finish"])
     if not 0 <= cfg["illumination"]["max_phase_deg"] <= 180:
         raise ScgenError("illumination.max_phase_deg must lie in [0, 180]")
+    near = cfg["illumination"]["sun_near_view"]
+    check_prob("illumination.sun_near_view.prob", near["prob"])
+    if not is_number(near["margin"]) or near["margin"] < 0:
+        raise ScgenError(f"illumination.sun_near_view.margin must be >= 0, got {near['margin']}")
     for name in ("illumination.probs", "occluders.group_probs"):
         section, key = name.split(".")
         _check_distribution(name, cfg[section][key])
@@ -318,6 +327,7 @@ def _check_finish(finish: dict[str, Any]) -> None:
         raise ScgenError(f"finish.mode must be one of {', '.join(FINISH_MODES)}, got {finish['mode']!r}")
     check_prob("finish.swap_prob", finish["swap_prob"])
     check_prob("finish.jitter", finish["jitter"])
+    check_prob("finish.nominal_prob", finish["nominal_prob"])
 
 
 def _check_distribution(name: str, probs: dict[str, float]) -> None:

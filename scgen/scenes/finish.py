@@ -5,7 +5,8 @@ scgen.scenes.materials (sorted by name, used by the target or not: the draws do 
 fixed number of draws whatever the outcome: with probability swap_prob the
 class becomes another one (uniform), then the base colour, roughness, metallic and crinkle strength are
 drawn within scgen.scenes.materials.FINISH_RANGES of the resulting class, scaled by `jitter`. The result maps
-each original class to {material, base, roughness, metallic, detail}; nominal mode gives {}.
+each original class to {material, base, roughness, metallic, detail}; nominal mode gives {}, and so does
+varied mode for a `nominal_prob` share of the samples (one more draw, after all the others).
 Only shading changes: the geometry, and so every label, is the same.
 """
 
@@ -44,7 +45,7 @@ def sample_finish(rng: np.random.Generator, cfg: dict[str, Any]) -> dict[str, di
             "metallic": _jitter(nominal.metallic, r.metallic, metallic, s),
             "detail": _jitter(1.0, r.detail, detail, s, log=True),
         }
-    return out
+    return {} if rng.uniform() < cfg["nominal_prob"] else out
 
 
 def _jitter(nominal: float, bounds: tuple[float, float], u: float, s: float, log: bool = False) -> float:

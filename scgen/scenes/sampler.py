@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -64,17 +65,19 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
 
     sun = _sample_sun(factor_rng(seed, index, "illumination"), cfg["illumination"], t)
     sun_dir = np.asarray(sun.direction)
-    background, clutter = _sample_background(
-        factor_rng(seed, index, "background"), cfg["background"], camera, t, shape.radius, radius_px, sun_dir
-    )
-    sky = sky_params(background.kind, cfg["background"], factor_rng(seed, index, "sky"), sun_dir)
-    background.params.update(sky)
+    background, clutter = _sample_sky_side(seed, index, cfg["background"], camera, t, shape.radius, radius_px,
+                                           sun_dir)  # fmt: skip
     occ_group, occluders = _sample_occluders(
         factor_rng(seed, index, "occluders"), cfg["occluders"], view, t, shape.radius
     )
     caster = _sample_shadow_caster(
         factor_rng(seed, index, "shadow"), cfg["shadow"], view, t, sun_dir, shape, target_cam
     )
+    near_view = _sample_sun_near_view(factor_rng(seed, index, "sun_view"), cfg["illumination"], camera)
+    if near_view is not None and not caster:  # a caster is placed for the first sun: it keeps it
+        sun = replace(sun, direction=tuple(float(x) for x in near_view))
+        background, clutter = _sample_sky_side(seed, index, cfg["background"], camera, t, shape.radius,
+                                               radius_px, near_view)  # fmt: skip
     return SceneSpec(
         seed=int(seed),
         index=int(index),
@@ -98,6 +101,34 @@ def _sample_sun(rng: np.random.Generator, cfg: dict[str, Any], t: np.ndarray) ->
     direction = random_direction_in_cone(rng, to_camera, np.deg2rad(cfg["max_phase_deg"]))
     irradiance = cfg["solar_irradiance"] * cfg["multipliers"][level]
     return SunSpec(tuple(float(x) for x in direction), level, float(irradiance))
+
+
+def _sample_sky_side(
+    seed: int, index: int, cfg: dict[str, Any], camera: CameraSpec, t: np.ndarray, radius: float,
+    radius_px: float, sun_dir: np.ndarray,
+) -> tuple[BackgroundSpec, list[PropSpec]]:  # fmt: skip
+    """The background, its clutter and its sky under this sun, from the background and sky streams (the
+    clutter does not depend on the sun, the Earth's placement and the sky do)."""
+    background, clutter = _sample_background(
+        factor_rng(seed, index, "background"), cfg, camera, t, radius, radius_px, sun_dir
+    )
+    background.params.update(sky_params(background.kind, cfg, factor_rng(seed, index, "sky"), sun_dir))
+    return background, clutter
+
+
+def _sample_sun_near_view(
+    rng: np.random.Generator, cfg: dict[str, Any], camera: CameraSpec
+) -> np.ndarray | None:
+    """With probability sun_near_view.prob, a direction towards the sun whose pinhole image falls
+    uniformly over the frame widened by `margin` of its size on every side; else None."""
+    near = cfg["sun_near_view"]
+    if rng.uniform() >= near["prob"]:
+        return None
+    m = near["margin"]
+    u = rng.uniform(-m, 1 + m) * camera.width - 0.5
+    v = rng.uniform(-m, 1 + m) * camera.height - 0.5
+    ray = backproject(camera.K_mat, u, v, 1.0)
+    return ray / np.linalg.norm(ray)
 
 
 def _sample_shadow_caster(
