@@ -29,8 +29,9 @@ DEFAULT_CAMERA: dict[str, Any] = {
         "auto_target": 0.18,  # auto: mean linear value of the target's visible pixels
         "auto_limits_ev": [-6.0, 6.0],  # auto: the EV it may add; the upper end caps highlight protection
         # range and auto: highlight protection, as a camera's auto-exposure does it: the exposure is shortened
-        # (EV raised) until at most this share of the frame's pixels clips (scgen.render.camera.exposure)
-        "max_clipped": 0.01,
+        # (EV raised) until at most this share of the frame's pixels clips (scgen.render.camera.exposure;
+        # docs/config.md says why 3 %)
+        "max_clipped": 0.03,
     },
     "optics": {
         "psf": "gaussian",  # gaussian | defocus (a uniform disc)
