@@ -1,6 +1,6 @@
 """Factor coverage of the default sampling config, and mean target luminance per illumination level.
 
-Usage: python benchmarks/factor_coverage.py [--n 400] [--seed 0] [--lum-n 150]
+Usage: python benchmarks/factor_coverage.py [--n 400] [--seed 0] [--lum-n 150] [--plan-n 0]
 
 Coverage: n SceneSpecs sampled exactly as `scgen render` samples them (default config, 640x480),
 rendered by the Mitsuba backend's geometry-only path (MitsubaBackend.render_geometry: the exact
@@ -11,6 +11,10 @@ The table marks groups under 15 % (30 % for the two shadow labels) with '*'.
 Luminance: lum-n samples fully rendered (Mitsuba, 320x240, draft); per image the mean linear
 luminance of the visible target pixels (scgen.render.lighting.mean_luminance); per level the
 quartiles, and whether the three interquartile ranges are disjoint.
+
+Plan (--plan-n N, e.g. 50000): the groups fixed when a scene is sampled, counted over N SceneSpecs
+without rendering: illumination, background, finish, and the flare candidates (the sun within the lens'
+flare reach of the field of view; the rendered label is "no" only where objects hide the whole disc).
 """
 
 from __future__ import annotations
@@ -23,9 +27,11 @@ import numpy as np
 
 from scgen.annotate import annotate
 from scgen.generator import Generator
+from scgen.render.camera.glare import FLARE_REACH_RAD, sun_view
 from scgen.render.lighting import mean_luminance
 from scgen.render.mitsuba_backend import MitsubaBackend
 from scgen.scenes.factors import FACTOR_GROUPS, distance_groups
+from scgen.scenes.finish import finish_group
 
 MIN_SHARE = {"shadow": 0.30}  # every other factor: 0.15
 
@@ -91,14 +97,36 @@ def luminance(n: int, seed: int) -> None:
     print(f"interquartile ranges disjoint and ordered: {disjoint}")
 
 
+def plan(n: int, seed: int) -> None:
+    generator = Generator.load(seed=seed)
+    counts: dict[str, Counter] = {f: Counter() for f in ("illumination", "background", "flare", "finish")}
+    t0 = time.perf_counter()
+    for i in range(n):
+        spec = generator.scene(i)
+        view = sun_view(spec.camera, np.asarray(spec.sun.direction))
+        near = view is not None and view.off_view_rad <= FLARE_REACH_RAD
+        counts["illumination"][spec.sun.level] += 1
+        counts["background"][spec.background.kind] += 1
+        counts["flare"][FACTOR_GROUPS["flare"][int(near)]] += 1
+        counts["finish"][finish_group(spec.finish)] += 1
+    print(f"\nplan of {n} samples, seed {seed}: {time.perf_counter() - t0:.0f} s")
+    for factor, counter in counts.items():
+        print(f"{factor:<13}" + ", ".join(f"{g} {counter[g]}" for g in FACTOR_GROUPS[factor]))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=400)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--lum-n", type=int, default=150)
+    ap.add_argument("--plan-n", type=int, default=0, help="Count the planned groups of this many samples.")
     args = ap.parse_args()
-    coverage(args.n, args.seed)
-    luminance(args.lum_n, args.seed)
+    if args.n:
+        coverage(args.n, args.seed)
+    if args.lum_n:
+        luminance(args.lum_n, args.seed)
+    if args.plan_n:
+        plan(args.plan_n, args.seed)
 
 
 if __name__ == "__main__":
