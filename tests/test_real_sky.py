@@ -11,7 +11,7 @@ from scgen.generator import Generator
 from scgen.render.backgrounds import background_image
 from scgen.render.buffers import BACKGROUND_ID
 from scgen.render.earth_surface import CLOUD_THRESHOLD, cloud_cover, disc_albedo
-from scgen.render.lighting import SOLAR_CONSTANT, earth_albedo_light, exposure_scale
+from scgen.render.lighting import SOLAR_CONSTANT, body_albedo_light, exposure_scale
 from scgen.render.stars import SUN_V, pixel_solid_angle, project_stars, star_image, tint
 from scgen.scenes import load_config
 from scgen.scenes.geometry import orthonormal_basis, unit_sphere_hits
@@ -98,7 +98,7 @@ def test_earth_light_takes_its_albedo_from_the_imagery(model):
 
     sahara, pacific = albedo_at(23.0, 12.0), albedo_at(-5.0, -140.0)
     assert 0.15 < pacific < sahara < 0.45
-    direction, irradiance = earth_albedo_light(spec)
+    direction, irradiance = body_albedo_light(spec)
     assert irradiance == pytest.approx(
         np.pi * disc_albedo(spec.background.params, sun, spec.background.seed) * spec.sun.irradiance
         * np.sin(np.radians(params["angular_radius_deg"])) ** 2 * 0.5 * (1 - direction @ sun)

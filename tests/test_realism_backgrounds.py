@@ -9,8 +9,12 @@ import pytest
 from scgen.errors import ScgenError
 from scgen.generator import Generator
 from scgen.render.backgrounds import background_image, srgb_to_linear
+from scgen.render.conventions import LUMA
+from scgen.render.lighting import exposure_scale
 from scgen.scenes import load_config
+from scgen.scenes.geometry import unit_sphere_hits
 from scgen.scenes.model import load_target
+from scgen.scenes.sky import background_holds
 
 SMALL = (160, 120)
 
@@ -31,6 +35,27 @@ def test_background_is_deterministic_and_kinds_differ():
         mean[kind] = float(np.mean(images))
     assert mean["clean"] < mean["cluttered"] < mean["complex"] < mean["earth"]
     assert mean["clean"] < 0.005  # black space with sparse stars
+
+
+def test_the_complex_sky_is_the_sunlit_moon_at_its_albedo_and_nothing_else_glows():
+    """The Moon's lit pixels are a Lambertian surface of the Moon's albedo under the sun (their mean
+    value over the sphere's own cosine: 0.08-0.18, the Moon's geometric albedo 0.12); off the Moon the
+    sky holds only the Hipparcos stars at their true brightness (the brightest, Sirius, about 1e-4 of a
+    sunlit plate), no nebula or band of glow."""
+    for spec in kind_specs("complex", n=6):
+        image = background_image(spec)
+        params = spec.background.params
+        c, rho = np.asarray(params["centre_dir"]), np.deg2rad(params["angular_radius_deg"])
+        rays = spec.camera.pixel_directions()
+        hit, n, _, _ = unit_sphere_hits(rays, c / np.sin(rho))
+        plate = spec.sun.irradiance * exposure_scale(spec)  # a white plate facing the sun
+        assert image[~hit].max() < 2e-4 * plate, image[~hit].max() / plate
+        facing = n @ np.asarray(spec.sun.direction)
+        lit = facing > 0.3
+        if lit.sum() > 200:
+            albedo = (image[hit][lit] @ LUMA).sum() / (plate * facing[lit]).sum()
+            assert 0.08 < albedo < 0.18, albedo
+        assert background_holds(spec.background.kind, params) in ("moon limb", "moon disc")
 
 
 def test_earth_shows_a_lit_part_in_the_frame():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from scgen.generator import Generator
-from scgen.render.lighting import earth_albedo_light, mean_luminance, sun_render_irradiance
+from scgen.render.lighting import body_albedo_light, mean_luminance, sun_render_irradiance
 from scgen.scenes import load_config
 from scgen.scenes.model import load_target
 
@@ -28,16 +28,25 @@ def test_sun_is_in_physical_units_and_the_camera_model_maps_one_au_to_one():
     assert sun_render_irradiance(spec) == pytest.approx(np.pi)  # white Lambert plate -> image value 1.0
 
 
-def test_earth_albedo_is_a_second_light_only_with_the_earth():
-    for kind in ("earth", "clean"):
+def test_the_earth_and_the_moon_are_a_second_light_only_where_they_are_in_the_sky():
+    """The body's reflected light a * E * sin^2(rho) * f: the Moon's at its albedo (0.12), from where
+    it is; none over a clean sky."""
+    for kind in ("earth", "complex", "clean"):
         cfg = load_config(overrides={"background": {"probs": {kind: 1.0}}})
         generator = Generator(load_target(), cfg, 1)
         specs = [generator.scene(i) for i in range(5)]
-        lights = [earth_albedo_light(s) for s in specs]
-        if kind == "earth":
-            assert all(light is not None and light[1] > 0 for light in lights)
-        else:
+        lights = [body_albedo_light(s) for s in specs]
+        if kind == "clean":
             assert all(light is None for light in lights)
+            continue
+        assert all(light is not None and light[1] > 0 for light in lights)
+        if kind == "complex":
+            for spec, (direction, irradiance) in zip(specs, lights, strict=True):
+                params = spec.background.params
+                lit = 0.5 * (1 - np.dot(params["centre_dir"], spec.sun.direction))
+                e = 0.12 * spec.sun.irradiance * np.sin(np.deg2rad(params["angular_radius_deg"])) ** 2 * lit
+                assert np.allclose(direction, params["centre_dir"])
+                assert irradiance == pytest.approx(np.pi * e / 1361.0 * 2.0**-spec.camera.exposure_ev)
 
 
 def test_levels_give_disjoint_interquartile_ranges_of_target_luminance():

@@ -36,14 +36,14 @@ from scgen.scenes.finish import finish_group
 from scgen.scenes.geometry import matrix_to_quat
 from scgen.scenes.imaging import IDEAL_IMAGING, mid_grey_snr
 from scgen.scenes.model import TargetModel
-from scgen.scenes.sky import sky_labels
+from scgen.scenes.sky import background_holds, sky_labels
 from scgen.scenes.spec import CameraSpec, SceneSpec
 
 METADATA_COLUMNS = (
     "sample_id", "split", "scene_id", "im_id", "illumination", "sun_irradiance_w_m2", "exposure_ev",
     "sun_x", "sun_y", "sun_z", "shadow", "shadow_fraction", "shadow_caster", "occlusion", "r_occ",
     "visib_fract", "px_count_all", "px_count_visib", "requested_occlusion", "occluder_config", "n_occluders",
-    "background", "distance_m", "tx", "ty", "tz", "qw", "qx", "qy", "qz", "viewpoint_cell", "combination_key",
+    "background", "background_holds", "distance_m", "tx", "ty", "tz", "qw", "qx", "qy", "qz", "viewpoint_cell", "combination_key",
     "camera", "noise", "noise_gain", "mid_grey_snr", "psf_fwhm_px", "motion_blur_px", "motion_blur_deg",
     "vignetting", "chromatic_px", "flare", "saturated",
     "finish", "earth_lat_deg", "earth_lon_deg", "sky_ra_deg", "sky_dec_deg",
@@ -182,6 +182,7 @@ def build_record(
         "occluder_config": occluder_config(spec),
         "n_occluders": len(spec.occluders),
         "background": spec.background.kind,
+        "background_holds": background_holds(spec.background.kind, spec.background.params),
         "distance_m": spec.distance_m,
         "tx": t[0],
         "ty": t[1],

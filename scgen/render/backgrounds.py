@@ -3,14 +3,15 @@
 Both backends render the foreground over a transparent film and composite it over these, so
 the backgrounds are the same image whatever the renderer. Kinds:
 - clean: black space with a sparse, faint star field;
-- complex: a dense star field, a Milky-Way band with dust lanes and coloured nebula glow;
+- complex: the sunlit Moon seen from lunar orbit (its cratered limb) or from afar (a disc), over the stars;
 - earth: a lit Earth limb or disc (oceans with sun glint, continents, ice, clouds, atmosphere rim);
 - cluttered: a moderate star field (the clutter itself is 3D props, rendered by the backend);
 - user: an image of the user's own (the sampler picks the file), cover-cropped, sRGB decoded.
 The sun's glare is the camera stage's (scgen.render.camera.glare), over the whole image.
 Sunlit things (the Earth) follow the camera model of scgen.render.lighting: they scale with the
-sun irradiance and the exposure. Stars and nebulae only scale with exposure; their brightness is
-exaggerated for visibility (real stars are about 1e-8 of a sunlit plate).
+sun irradiance and the exposure; so does the Moon (scgen.render.moon_surface). The procedural stars only
+scale with exposure and are exaggerated for visibility (real stars, the Hipparcos default, are about 1e-8
+of a sunlit plate): nothing else in the sky glows.
 """
 
 from __future__ import annotations
@@ -22,13 +23,14 @@ from scgen.errors import ScgenError
 from scgen.render.bluemarble import level_of_detail
 from scgen.render.earth_surface import bluemarble_surface, procedural_surface
 from scgen.render.lighting import exposure_scale
+from scgen.render.moon_surface import moon_surface
 from scgen.render.stars import star_image
-from scgen.render.textures import smooth_noise
 from scgen.scenes.geometry import random_rotation, unit_sphere_hits
 from scgen.scenes.sky import earth_frame, sky_frame
 from scgen.scenes.spec import SceneSpec
 
-STARS_PER_MEGAPIXEL = {"clean": 150, "earth": 150, "cluttered": 600, "complex": 6000}
+STARS_PER_MEGAPIXEL = {"clean": 150, "earth": 150, "cluttered": 600, "complex": 150}
+MOON_TINT = np.array([1.06, 1.0, 0.9])  # the Moon's reddish grey, unit luminance
 SKY_BLUE = np.array([0.22, 0.45, 1.0])  # atmosphere scattering colour
 
 
@@ -47,9 +49,7 @@ def background_image(spec: SceneSpec) -> np.ndarray:
         density = STARS_PER_MEGAPIXEL[kind] * cam.width * cam.height / 1e6
         img = _star_field(rng, cam.height, cam.width, int(density)) * gain
     if kind == "complex":
-        rays = spec.camera.pixel_directions()
-        img += gain * _milky_way(rng, rays)
-        img += gain * _nebula(rng, cam.height, cam.width)
+        img = _moon(spec, rng, spec.camera.pixel_directions(), img)
     elif kind == "earth":
         img = _earth(spec, rng, spec.camera.pixel_directions(), img)
     return img.astype(np.float32)
@@ -73,27 +73,25 @@ def _star_field(rng: np.random.Generator, h: int, w: int, n_stars: int) -> np.nd
     return cv2.GaussianBlur(img, (0, 0), 0.7) * 3.0
 
 
-def _milky_way(rng: np.random.Generator, rays: np.ndarray) -> np.ndarray:
-    """A galactic band along a random great circle: diffuse glow, mottled, with dark dust lanes."""
-    h, w = rays.shape[:2]
-    pole = rng.normal(size=3)
-    pole /= np.linalg.norm(pole)
-    lat = np.arcsin(np.clip(rays @ pole, -1, 1))
-    mottle = smooth_noise(rng, h, w, octaves=6, base=3)
-    dust = smooth_noise(rng, h, w, octaves=6, base=4)
-    width = rng.uniform(0.12, 0.25)
-    band = np.exp(-((lat / width) ** 2)) * (0.3 + mottle)
-    lanes = 1.0 - 0.9 * np.exp(-((lat / (0.4 * width)) ** 2)) * np.clip((dust - 0.4) * 4, 0, 1)
-    return (0.07 * band * lanes)[..., None] * np.array([1.0, 0.92, 0.8])
+def _moon(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np.ndarray) -> np.ndarray:
+    """The sunlit Moon: the unit sphere at direction c seen with angular radius rho, over the stars.
 
-
-def _nebula(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
-    """Coloured emission/reflection glow: sparse fractal clouds in two hues."""
-    out = np.zeros((h, w, 3), np.float32)
-    for hue in (np.array([1.0, 0.35, 0.45]), np.array([0.35, 0.55, 1.0])):
-        density = np.clip(smooth_noise(rng, h, w, octaves=6, base=2) - 0.45, 0, None) ** 1.5
-        out += (rng.uniform(0.0, 0.25) * density[..., None] * hue).astype(np.float32)
-    return out
+    Lambertian under the sun with the map's albedo and the craters' and relief's slopes; the terminator
+    is the sphere's own, so slopes tilt light within the day side only. Airless: no haze, no glow.
+    """
+    params = spec.background.params
+    c = np.asarray(params["centre_dir"], np.float64)
+    rho = np.deg2rad(params["angular_radius_deg"])
+    hit, n, _, _ = unit_sphere_hits(rays, c / np.sin(rho))
+    turn = random_rotation(rng)  # camera -> selenographic: each sample sees another part of the Moon
+    east = np.cross(turn[2], n)  # turn[2]: the Moon's north pole in the camera frame
+    east /= np.maximum(np.linalg.norm(east, axis=1, keepdims=True), 1e-9)
+    albedo, shading = moon_surface(n @ turn.T, n, east, np.cross(n, east))
+    sun = np.asarray(spec.sun.direction)
+    lit = np.clip(shading @ sun, 0, 1) * (n @ sun > 0)
+    img = stars.copy()
+    img[hit] = spec.sun.irradiance * exposure_scale(spec) * (albedo * lit)[:, None] * MOON_TINT
+    return img.astype(np.float32)
 
 
 def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np.ndarray) -> np.ndarray:

@@ -36,7 +36,7 @@ from scgen.render.blender_settings import (
 )
 from scgen.render.buffers import TARGET_ID
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, render_seed
-from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
+from scgen.render.lighting import body_albedo_light, sun_render_irradiance
 from scgen.render.props import prop_mesh
 from scgen.scenes.finish import finished
 from scgen.scenes.model import TargetModel
@@ -215,7 +215,7 @@ class BlenderScene:
         sun = np.asarray(spec.sun.direction, np.float64)
         self.sun.matrix_world = self.probe.matrix_world = self._Matrix(light_matrix_world(sun).tolist())
         self.sun.data.energy = sun_render_irradiance(spec)  # Cycles: white Lambert radiance = strength / pi
-        albedo = earth_albedo_light(spec)
+        albedo = body_albedo_light(spec)
         self.earthshine.hide_render = albedo is None
         if albedo is not None:
             direction, irradiance = albedo

@@ -15,6 +15,7 @@ import numpy as np
 
 from scgen.render.conventions import LUMA
 from scgen.render.earth_surface import disc_albedo
+from scgen.scenes.sky import BODY_OF_KIND
 from scgen.scenes.spec import SceneSpec
 
 SOLAR_CONSTANT = 1361.0
@@ -30,14 +31,16 @@ def sun_render_irradiance(spec: SceneSpec) -> float:
     return float(np.pi * spec.sun.irradiance * exposure_scale(spec))
 
 
-def earth_albedo_light(spec: SceneSpec) -> tuple[np.ndarray, float] | None:
-    """(direction towards the Earth, renderer irradiance) of the Earth's reflected light, or None.
+def body_albedo_light(spec: SceneSpec) -> tuple[np.ndarray, float] | None:
+    """(direction towards the body, renderer irradiance) of the Earth's or the Moon's reflected light
+    (the background's sunlit body), or None.
 
     A Lambertian sphere of albedo a subtending angular radius rho and lit at phase such that a
     fraction f = (1 - s.c) / 2 of the visible disc is day side gives about a * E * sin^2(rho) * f.
-    A Blue Marble Earth's albedo is its imagery's (clouds included) over the lit visible disc.
+    A Blue Marble Earth's albedo is its imagery's (clouds included) over the lit visible disc; the
+    procedural Earth's and the Moon's are the config's.
     """
-    if spec.background.kind != "earth":
+    if spec.background.kind not in BODY_OF_KIND:
         return None
     params = spec.background.params
     c = np.asarray(params["centre_dir"], np.float64)

@@ -13,7 +13,7 @@ import mitsuba as mi
 import numpy as np
 
 from scgen.render.conventions import CLIP_START_M, EARTHSHINE_COLOUR
-from scgen.render.lighting import earth_albedo_light, sun_render_irradiance
+from scgen.render.lighting import body_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba_memory import channels, check_held, overwrite, own_scalars
 from scgen.scenes.spec import SceneSpec
 
@@ -31,7 +31,7 @@ def sample_lights(spec: SceneSpec) -> dict[str, dict]:
             "irradiance": {"type": "rgb", "value": sun_render_irradiance(spec)},
         }
     }
-    albedo = earth_albedo_light(spec)
+    albedo = body_albedo_light(spec)
     if albedo is not None:
         direction, irradiance = albedo
         lights["earthshine"] = {

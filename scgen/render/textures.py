@@ -2,20 +2,7 @@
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
-
-
-def smooth_noise(rng: np.random.Generator, h: int, w: int, octaves: int = 5, base: int = 3) -> np.ndarray:
-    """Fractal value noise in [0, 1] (sum of bicubically upsampled random grids)."""
-    acc = np.zeros((h, w), np.float32)
-    amp = 1.0
-    for o in range(octaves):
-        n = base * 2**o
-        grid = rng.uniform(0, 1, (n + 1, n + 1)).astype(np.float32)
-        acc += amp * cv2.resize(grid, (w, h), interpolation=cv2.INTER_CUBIC)
-        amp *= 0.5
-    return (acc - acc.min()) / max(1e-6, float(acc.max() - acc.min()))
 
 
 def periodic_noise(rng: np.random.Generator, h: int, w: int, beta: float, aspect: float = 1.0) -> np.ndarray:

@@ -21,6 +21,7 @@ from scgen.scenes.camera_config import DEFAULT_CAMERA, camera_preset, check_came
 from scgen.scenes.checks import check_prob, check_range, is_number
 from scgen.scenes.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
 from scgen.scenes.finish import FINISH_MODES
+from scgen.scenes.sky import BODIES
 from scgen.scenes.sky_data import BLUE_MARBLE, HIPPARCOS, resolve_source
 from scgen.scenes.spec import CameraSpec
 
@@ -81,6 +82,11 @@ DEFAULT_CONFIG: dict[str, Any] = {
         "earth_limb_prob": 0.6,  # a low-orbit limb crossing the frame; else a whole distant disc
         "earth_limb_radius_deg": [55.0, 72.0],
         "earth_disc_radius_deg": [8.0, 20.0],
+        # complex: the Moon seen from lunar orbit (its limb, from low orbit) or from afar (a whole disc)
+        "moon_albedo": 0.12,  # its geometric albedo: the Moon's light on the target (the map gives the image)
+        "moon_limb_prob": 0.5,
+        "moon_limb_radius_deg": [40.0, 72.0],  # 72 deg: 100 km up; 40 deg: ~960 km
+        "moon_disc_radius_deg": [4.0, 20.0],
         "clutter_count": [3, 7],
         "clutter_depth_factor": [1.4, 4.0],
         # clutter prop half-length in target projected radii (at the prop's depth)
@@ -290,12 +296,13 @@ def _resolve_background(bg: dict[str, Any]) -> None:
     check_range("background.clutter_count", bg["clutter_count"], low=0)
     check_range("background.clutter_depth_factor", bg["clutter_depth_factor"], low=1.0)
     check_range("background.clutter_size_rel", bg["clutter_size_rel"], low=1e-6)
-    check_range("background.earth_limb_radius_deg", bg["earth_limb_radius_deg"], low=1.0)
-    check_range("background.earth_disc_radius_deg", bg["earth_disc_radius_deg"], low=0.1)
-    if bg["earth_limb_radius_deg"][1] >= 90 or bg["earth_disc_radius_deg"][1] >= 90:
-        raise ScgenError("background earth radii must stay below 90 degrees")
-    check_prob("background.earth_limb_prob", bg["earth_limb_prob"])
-    check_prob("background.earth_albedo", bg["earth_albedo"])
+    for body in BODIES:
+        check_range(f"background.{body}_limb_radius_deg", bg[f"{body}_limb_radius_deg"], low=1.0)
+        check_range(f"background.{body}_disc_radius_deg", bg[f"{body}_disc_radius_deg"], low=0.1)
+        if bg[f"{body}_limb_radius_deg"][1] >= 90 or bg[f"{body}_disc_radius_deg"][1] >= 90:
+            raise ScgenError(f"background {body} radii must stay below 90 degrees")
+        check_prob(f"background.{body}_limb_prob", bg[f"{body}_limb_prob"])
+        check_prob(f"background.{body}_albedo", bg[f"{body}_albedo"])
     for key, real, package in (("earth_map", "bluemarble", BLUE_MARBLE), ("stars", "hipparcos", HIPPARCOS)):
         if bg[key] not in (real, "procedural"):
             raise ScgenError(f"background.{key} must be {real} or procedural, got {bg[key]!r}")

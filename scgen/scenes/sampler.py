@@ -21,14 +21,14 @@ from scgen.scenes.materials import PROP_MATERIALS
 from scgen.scenes.placement import Blank, place_caster, place_occluder
 from scgen.scenes.rng import factor_rng
 from scgen.scenes.silhouette import CameraView, TargetShape, camera_view, sun_view
-from scgen.scenes.sky import sky_params
+from scgen.scenes.sky import BODY_OF_KIND, sky_params
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, PropSpec, SceneSpec, SunSpec
 
 OCCLUDER_SHAPES = ("panel", "box", "rod", "debris", "arm")
 CASTER_SHAPES = ("panel", "box", "truss", "arm")
 CLUTTER_SHAPES = ("truss", "panel", "box", "debris", "arm")
-EARTH_MIN_LIT = 0.08  # share of the frame an Earth background must show as lit day side
-EARTH_TRIES = 32
+BODY_MIN_LIT = 0.08  # share of the frame an Earth or Moon background must show as lit day side
+BODY_TRIES = 32
 
 
 def _choice(rng: np.random.Generator, probs: dict[str, float]) -> str:
@@ -163,8 +163,8 @@ def _sample_background(
     bg_seed = int(rng.integers(2**31))
     params: dict[str, Any] = {}
     clutter: list[PropSpec] = []
-    if kind == "earth":
-        params = _sample_earth(rng, cfg, camera, sun_dir)
+    if kind in BODY_OF_KIND:
+        params = _sample_body(rng, cfg, camera, sun_dir, BODY_OF_KIND[kind])
     elif kind == USER_BACKGROUND:
         images = cfg["user_images"]
         params = {"image": images[int(rng.integers(len(images)))]}
@@ -180,14 +180,15 @@ def _sample_background(
     return BackgroundSpec(kind, bg_seed, params), clutter
 
 
-def _sample_earth(
-    rng: np.random.Generator, cfg: dict[str, Any], camera: CameraSpec, sun_dir: np.ndarray
+def _sample_body(
+    rng: np.random.Generator, cfg: dict[str, Any], camera: CameraSpec, sun_dir: np.ndarray, body: str
 ) -> dict[str, Any]:
-    """An Earth limb (low orbit) or disc (high orbit) in view, its part in the frame mostly day side.
+    """The Earth's or the Moon's limb (low orbit) or disc (high orbit) in view, its part in the frame
+    mostly day side (config keys `{body}_limb_prob`, `{body}_limb_radius_deg`, ...).
 
-    The Earth is a unit sphere seen at angular radius rho; its centre direction makes angle theta
+    The body is a unit sphere seen at angular radius rho; its centre direction makes angle theta
     with the optical axis (theta near rho puts the limb across the frame). Placements are redrawn
-    (a bounded number of times, deterministically) until the frame shows enough lit Earth.
+    (a bounded number of times, deterministically) until the frame shows enough lit surface.
     """
     K = camera.K_mat
     half_diag = np.arctan(np.hypot(0.5 * camera.width / K[0, 0], 0.5 * camera.height / K[1, 1]))
@@ -196,26 +197,26 @@ def _sample_earth(
     rays /= np.linalg.norm(rays, axis=1, keepdims=True)
     x, y = orthonormal_basis(np.array([0.0, 0.0, 1.0]))
     best: tuple[float, dict[str, Any]] = (-1.0, {})
-    for _ in range(EARTH_TRIES):
-        limb = bool(rng.uniform() < cfg["earth_limb_prob"])
+    for _ in range(BODY_TRIES):
+        limb = bool(rng.uniform() < cfg[f"{body}_limb_prob"])
         if limb:
-            rho = np.deg2rad(rng.uniform(*cfg["earth_limb_radius_deg"]))
+            rho = np.deg2rad(rng.uniform(*cfg[f"{body}_limb_radius_deg"]))
             theta = rho + rng.uniform(-0.8, 0.3) * half_diag
         else:
-            rho = np.deg2rad(rng.uniform(*cfg["earth_disc_radius_deg"]))
+            rho = np.deg2rad(rng.uniform(*cfg[f"{body}_disc_radius_deg"]))
             theta = rng.uniform(0.0, max(half_diag - 0.3 * rho, 0.0))
         az = rng.uniform(0, 2 * np.pi)
         centre = np.cos(theta) * np.array([0.0, 0.0, 1.0]) + np.sin(theta) * (np.cos(az) * x + np.sin(az) * y)
         params = {"centre_dir": [float(c) for c in centre], "angular_radius_deg": float(np.rad2deg(rho)),
-                  "albedo": float(cfg["earth_albedo"]), "limb": limb}  # fmt: skip
-        score = _earth_lit_share(rays, centre / np.sin(rho), sun_dir)
-        if score >= EARTH_MIN_LIT:
+                  "albedo": float(cfg[f"{body}_albedo"]), "limb": limb}  # fmt: skip
+        score = _lit_share(rays, centre / np.sin(rho), sun_dir)
+        if score >= BODY_MIN_LIT:
             return params
         best = max(best, (score, params), key=lambda b: b[0])
     return best[1]
 
 
-def _earth_lit_share(rays: np.ndarray, centre: np.ndarray, sun_dir: np.ndarray) -> float:
+def _lit_share(rays: np.ndarray, centre: np.ndarray, sun_dir: np.ndarray) -> float:
     """Share of the probe rays that see the unit sphere at `centre` on its day side."""
     _, normal, _, _ = unit_sphere_hits(rays, centre)
     return float(np.sum(normal @ sun_dir > 0.15) / len(rays))

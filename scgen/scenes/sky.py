@@ -17,6 +17,8 @@ from scgen.scenes.geometry import orthonormal_basis
 OBLIQUITY_RAD = np.deg2rad(23.439)  # of the ecliptic to the celestial equator
 SKY_KINDS = ("clean", "complex", "earth", "cluttered")  # the kinds with a sky (not the user's images)
 SKY_COLUMNS = ("earth_lat_deg", "earth_lon_deg", "sky_ra_deg", "sky_dec_deg")  # metadata.csv
+BODY_OF_KIND = {"earth": "earth", "complex": "moon"}  # the sunlit body a background kind shows
+BODIES = tuple(BODY_OF_KIND.values())
 
 
 def _rz(angle: float) -> np.ndarray:
@@ -76,6 +78,14 @@ def lat_lon_deg(v: np.ndarray) -> tuple[float, float]:
     """Latitude and longitude (deg) of a direction in a frame whose z is the pole."""
     v = np.asarray(v, np.float64) / np.linalg.norm(v)
     return float(np.rad2deg(np.arcsin(np.clip(v[2], -1, 1)))), float(np.rad2deg(np.arctan2(v[1], v[0])))
+
+
+def background_holds(kind: str, params: dict[str, Any]) -> str:
+    """What a background shows, for metadata.csv: 'earth limb', 'moon disc', 'stars', 'stars, props' or
+    'user image'."""
+    if kind in BODY_OF_KIND:
+        return f"{BODY_OF_KIND[kind]} {'limb' if params['limb'] else 'disc'}"
+    return {"clean": "stars", "cluttered": "stars, props"}.get(kind, "user image")
 
 
 def sky_labels(params: dict[str, Any]) -> dict[str, float | str]:
