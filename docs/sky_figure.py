@@ -4,7 +4,7 @@
 
 1. The Blue Marble Earth: two low-orbit limbs and two distant discs (samples of seed 1 with an Earth).
 2. The Hipparcos sky behind the target: one scene at the true star brightness (black, as in flight
-   images), +20 EV and +24 EV of background.stars_boost_ev, and a wider, fainter look at +24 EV.
+   images), +20 EV and +24 EV of background.stars_boost_ev, and a `complex` sky: the sunlit Moon.
 3. The target's finish: the scene of row 2 with the nominal finish and three drawn finishes.
 """
 
@@ -56,9 +56,9 @@ def stars_row(render: dict) -> list[np.ndarray]:
         overrides = {**CLOSE_UP, "background": {"probs": {"clean": 1.0}, "stars_boost_ev": boost}}
         with _generator(overrides, 2, **render) as gen:
             panels.append(_label(gen.sample(0).buffers.rgb, f"Hipparcos, stars_boost_ev {boost:g}"))
-    overrides = {"background": {"probs": {"complex": 1.0}, "stars_boost_ev": 24.0}}
+    overrides = {"background": {"probs": {"complex": 1.0}}}
     with _generator(overrides, 2, **render) as gen:
-        panels.append(_label(gen.sample(1).buffers.rgb, "complex, stars_boost_ev 24"))
+        panels.append(_label(gen.sample(1).buffers.rgb, "complex: the Moon"))
     return panels
 
 
