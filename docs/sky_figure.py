@@ -67,7 +67,7 @@ def finish_row(render: dict) -> list[np.ndarray]:
     with _generator(overrides, 2, **render) as gen:
         spec = gen.scene(0)
         panels = [_label(gen.render(spec).buffers.rgb, "finish: nominal")]
-        cfg = {"mode": "varied", "swap_prob": 0.2, "jitter": 1.0}
+        cfg = {"mode": "varied", "swap_prob": 0.2, "jitter": 1.0, "nominal_prob": 0.0}
         for draw in (3, 5, 11):
             finish = sample_finish(factor_rng(2, draw, "finish"), cfg)
             panels.append(_label(gen.render(replace(spec, finish=finish)).buffers.rgb,
