@@ -1,1 +1,0 @@
-"""Running a render: the plan, the executors (local processes, Ray) and the workers that write samples."""
