@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 from posenet_learning import BACKEND, RESOLUTION, SEED, WORKERS, run_script, schedule
+from scipy.optimize import brentq
 
 from posenet.config import load_config
 from posenet.data.dataset import first_images
@@ -36,6 +37,8 @@ from scgen.run.runner import RenderJob, run_render
 
 N, SIZES, TEST_N, STEPS = 30000, (700, 2100, 7000, 21000), 1000, 10440
 PAPER_TRAIN_IMAGES = 35000  # the paper's training set (35,000 images at 640x480, 300 epochs)
+# the median rotation error of a guess uniform over SO(3): the angle's CDF is (t - sin t) / pi
+CHANCE_RE_DEG = float(np.rad2deg(brentq(lambda t: t - np.sin(t) - np.pi / 2, 0.0, np.pi)))
 FIGURES = ("re_deg_median", "add_0.1d", "add_rot_0.1d", "te_0.1d", "turned", "tz_rel_median", "te_m_median")
 
 
@@ -96,14 +99,18 @@ def plot(path: Path, points: list[dict[str, Any]], test_n: int, steps: int) -> N
     ax.set_xscale("log")
     ax.set_xlabel("training images (log scale)")
     ax.set_ylabel("test rotation error, median (deg)", color="tab:red")
-    ax.set_ylim(0, 1.1 * max([p["test"]["re_deg_median"] for p in points] + [1.0]))
+    ax.set_ylim(0, 1.1 * max([p["test"]["re_deg_median"] for p in points] + [CHANCE_RE_DEG]))
+    ax.axhline(CHANCE_RE_DEG, color="tab:red", ls=":", alpha=0.6)
+    left = min([*x, 700]) / 1.5
+    ax.text(left, CHANCE_RE_DEG, f" a random rotation: {CHANCE_RE_DEG:.0f} deg", color="tab:red", va="bottom",
+            alpha=0.8)  # fmt: skip
     ax.axvline(PAPER_TRAIN_IMAGES, color="grey", ls="--")
     ax.text(PAPER_TRAIN_IMAGES, ax.get_ylim()[1] * 0.95, " paper: 35,000", color="grey", va="top")
     ax2 = ax.twinx()
     ax2.plot(x, [100 * p["test"]["add_0.1d"] for p in points], "s-", color="tab:blue", label="ADD@0.1d")
     ax2.set_ylabel("test ADD@0.1d (%)", color="tab:blue")
     ax2.set_ylim(0, 100)
-    ax.set_xlim(min([*x, 700]) / 1.5, PAPER_TRAIN_IMAGES * 1.5)
+    ax.set_xlim(left, PAPER_TRAIN_IMAGES * 1.5)
     ax.grid(True, which="both", alpha=0.3)
     ax.set_title(f"CPU recipe, {steps} steps each; {test_n} held-out test images, GT boxes")
     fig.tight_layout()
@@ -128,6 +135,8 @@ def run(args: argparse.Namespace) -> list[dict[str, Any]]:
                                                   "points": points}, indent=1) + "\n")  # fmt: skip
         plot(args.out / "data_curve.png", points, len(held_out), args.steps)
         print(f"{size} images: " + ", ".join(f"{k} {summary[k]:.4g}" for k in FIGURES))
+    if points:
+        plot(args.out / "data_curve.png", points, len(held_out), args.steps)
     if len(points) >= 2:  # the trend of the median rotation error in log(images), for the reading
         x = np.log10([p["train_images"] for p in points])
         slope = np.polyfit(x, [p["test"]["re_deg_median"] for p in points], 1)[0]
