@@ -60,12 +60,13 @@ def dist(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return {"sdist": sdist, "wheel": wheel}
 
 
-def fresh_venv(where: Path, wheel: Path, extras: str) -> Path:
-    """A venv at `where` holding the wheel and, through a folder of links, exactly the installed
+def fresh_venv(root: Path, wheel: Path, extras: str) -> tuple[Path, Path]:
+    """A venv at root/venv holding the wheel and, through a folder of links, exactly the installed
     distributions that `pip install 'WHEEL[extras]'` would pull in (the wheel's requirements and theirs,
     extras and markers evaluated): a dependency the wheel forgets to declare is missing there, as on a
-    user's machine. Its bin folder."""
-    run(sys.executable, "-m", "venv", "--without-pip", where, cwd=where.parent)
+    user's machine. Its bin folder, and root/work, an empty folder outside the checkout to run it from."""
+    where = root / "venv"
+    run(sys.executable, "-m", "venv", "--without-pip", where, cwd=root)
     deps = where / "deps"
     deps.mkdir()
     site = Path(sysconfig.get_paths()["purelib"])
@@ -77,8 +78,9 @@ def fresh_venv(where: Path, wheel: Path, extras: str) -> Path:
     (venv_site,) = where.glob("lib/python3*/site-packages")
     (venv_site / "deps.pth").write_text(f"{deps}\n")
     pip = (sys.executable, "-m", "pip", "--python", where / "bin" / "python")
-    run(*pip, "install", "--no-deps", "-q", wheel, cwd=where.parent)
-    return where / "bin"
+    run(*pip, "install", "--no-deps", "-q", wheel, cwd=root)
+    (root / "work").mkdir()
+    return where / "bin", root / "work"
 
 
 def installed_closure(requirements: list[Requirement]) -> set[str]:
@@ -144,9 +146,7 @@ def test_each_extra_installs_only_its_job(dist: dict[str, Path]) -> None:
 def test_a_full_install_renders_validates_and_trains_from_another_directory(
     dist: dict[str, Path], tmp_path: Path
 ) -> None:
-    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], "all")
-    work = tmp_path / "work"
-    work.mkdir()
+    bin_, work = fresh_venv(tmp_path, dist["wheel"], "all")
     code = "import scgen, posenet; print(scgen.__file__, posenet.__file__)"
     where = run(bin_ / "python", "-c", code, cwd=work)
     assert all(p.startswith(str(tmp_path / "venv" / "lib")) for p in where.stdout.split()), where.stdout
@@ -165,9 +165,7 @@ def test_a_training_install_trains_and_evaluates_without_a_renderer(
     dist: dict[str, Path], tmp_path: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
     data = posenet_dataset(tmp_path_factory)
-    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], "train")
-    work = tmp_path / "work"
-    work.mkdir()
+    bin_, work = fresh_venv(tmp_path, dist["wheel"], "train")
     for module in RENDERERS:
         run(bin_ / "python", "-c", f"import {module}", cwd=work, ok=False)
     doctor = run(bin_ / "scgen", "doctor", cwd=work).stdout  # no renderer is no failure on this node
@@ -184,9 +182,7 @@ def test_a_training_install_trains_and_evaluates_without_a_renderer(
 def test_a_rendering_install_renders_without_torch_and_says_what_posenet_needs(
     dist: dict[str, Path], tmp_path: Path
 ) -> None:
-    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], "render")
-    work = tmp_path / "work"
-    work.mkdir()
+    bin_, work = fresh_venv(tmp_path, dist["wheel"], "render")
     run(bin_ / "python", "-c", "import torch", cwd=work, ok=False)
     done = run(bin_ / "scgen", "render", *SMALL_RENDER, "--n", "2", "--workers", "1", "--out", "ds", cwd=work)
     assert "2/2 on disk" in done.stdout
@@ -200,9 +196,7 @@ def test_ray_workers_running_the_installed_wheel_equal_a_local_run(
 ) -> None:
     """A shared install: the Ray driver and its workers run the venv's wheel (no checkout on any path)."""
     pytest.importorskip("ray")
-    bin_ = fresh_venv(tmp_path / "venv", dist["wheel"], "render,ray")
-    work = tmp_path / "work"
-    work.mkdir()
+    bin_, work = fresh_venv(tmp_path, dist["wheel"], "render,ray")
     common = (*SMALL_RENDER, "--n", "4", "--seed", "3")
     run(bin_ / "scgen", "render", *common, "--executor", "ray", "--workers", "2", "--out", "ray", cwd=work)
     run(sys.executable, "-m", "scgen.cli", "render", *common, "--workers", "1", "--out", tmp_path / "local",
