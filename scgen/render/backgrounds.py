@@ -26,7 +26,7 @@ from scgen.render.lighting import exposure_scale
 from scgen.render.moon_surface import moon_surface
 from scgen.render.stars import star_image
 from scgen.scenes.geometry import random_rotation, unit_sphere_hits
-from scgen.scenes.sky import earth_frame, sky_frame
+from scgen.scenes.sky import body_centre, earth_frame, sky_frame
 from scgen.scenes.spec import SceneSpec
 
 STARS_PER_MEGAPIXEL = {"clean": 150, "earth": 150, "cluttered": 600, "complex": 150}
@@ -79,10 +79,7 @@ def _moon(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np
     Lambertian under the sun with the map's albedo and the craters' and relief's slopes; the terminator
     is the sphere's own, so slopes tilt light within the day side only. Airless: no haze, no glow.
     """
-    params = spec.background.params
-    c = np.asarray(params["centre_dir"], np.float64)
-    rho = np.deg2rad(params["angular_radius_deg"])
-    hit, n, _, _ = unit_sphere_hits(rays, c / np.sin(rho))
+    hit, n, _, _ = unit_sphere_hits(rays, body_centre(spec.background.params))
     turn = random_rotation(rng)  # camera -> selenographic: each sample sees another part of the Moon
     east = np.cross(turn[2], n)  # turn[2]: the Moon's north pole in the camera frame
     east /= np.maximum(np.linalg.norm(east, axis=1, keepdims=True), 1e-9)
@@ -102,9 +99,7 @@ def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: n
     above it; night side black.
     """
     params = spec.background.params
-    c = np.asarray(params["centre_dir"], np.float64)
-    rho = np.deg2rad(params["angular_radius_deg"])
-    centre = c / np.sin(rho)  # Earth of radius 1 at this distance subtends rho
+    centre = body_centre(params)
     hit, n, b, disc = unit_sphere_hits(rays, centre)  # n: unit surface normals
     sun = np.asarray(spec.sun.direction)
     irr = spec.sun.irradiance * exposure_scale(spec)  # image value of a white plate facing the sun

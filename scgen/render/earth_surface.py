@@ -16,7 +16,7 @@ import numpy as np
 from scgen.render import bluemarble
 from scgen.render.conventions import LUMA
 from scgen.render.textures import equirect, periodic_noise
-from scgen.scenes.sky import earth_frame
+from scgen.scenes.sky import body_centre, earth_frame
 
 EARTH_OCEAN = np.array([0.010, 0.030, 0.085])
 EARTH_LAND = (np.array([0.06, 0.09, 0.035]), np.array([0.23, 0.17, 0.10]))  # vegetation, desert
@@ -83,8 +83,7 @@ def disc_albedo(params: dict[str, Any], sun: np.ndarray, seed: int) -> float:
     """Mean albedo (luminance) of the Blue Marble Earth over its lit visible disc, each surface point
     weighted by its sunlit cosine and its projected area towards the camera (mu_s * mu_v); 0 when no
     lit point is visible."""
-    rho = np.deg2rad(params["angular_radius_deg"])
-    to_camera = -np.asarray(params["centre_dir"], np.float64) / np.sin(rho)  # Earth centre -> camera
+    to_camera = -body_centre(params)  # Earth centre -> camera
     k = np.arange(DISC_POINTS) + 0.5
     z = 1 - 2 * k / DISC_POINTS  # Fibonacci sphere: equal-area points
     phi = np.pi * (1 + 5**0.5) * k

@@ -80,6 +80,13 @@ def lat_lon_deg(v: np.ndarray) -> tuple[float, float]:
     return float(np.rad2deg(np.arcsin(np.clip(v[2], -1, 1)))), float(np.rad2deg(np.arctan2(v[1], v[0])))
 
 
+def body_centre(params: dict[str, Any]) -> np.ndarray:
+    """Camera-frame centre of the background's sunlit body, in its own radii: a unit sphere at this
+    distance along `centre_dir` subtends `angular_radius_deg`."""
+    rho = np.deg2rad(params["angular_radius_deg"])
+    return np.asarray(params["centre_dir"], np.float64) / np.sin(rho)
+
+
 def background_holds(kind: str, params: dict[str, Any]) -> str:
     """What a background shows, for metadata.csv: 'earth limb', 'moon disc', 'stars', 'stars, props' or
     'user image'."""
