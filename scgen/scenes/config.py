@@ -85,7 +85,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
         # complex: the Moon seen from lunar orbit (its limb, from low orbit) or from afar (a whole disc)
         "moon_albedo": 0.12,  # its geometric albedo: the Moon's light on the target (the map gives the image)
         "moon_limb_prob": 0.5,
-        "moon_limb_radius_deg": [20.0, 35.0],  # 35 deg: ~1,300 km up, 20 deg: ~3,300 km (NRHO perilune)
+        "moon_limb_radius_deg": [40.0, 72.0],  # 72 deg: 100 km up; 40 deg: ~960 km
         "moon_disc_radius_deg": [4.0, 20.0],
         "clutter_count": [3, 7],
         "clutter_depth_factor": [1.4, 4.0],
