@@ -43,7 +43,7 @@ from scgen.run.runner import RenderJob, run_render
 
 MB = 1024 * 1024
 FULL_SIZE = (640, 480)  # the cost model's image size
-# 2 workers x 1 thread at 640x480, default quality: 0.735 img/s steady (README's worker table)
+# 2 workers x 1 thread at 640x480, default quality: 0.735 img/s steady (docs/scale-out.md's worker table)
 BLENDER_CORE_S = 2 / 0.735
 
 

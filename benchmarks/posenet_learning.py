@@ -1,8 +1,9 @@
 """posenet learning benchmark: train a config on an scgen dataset, following the held-out test split.
 
-Reproduce the README figures (renders 1000 samples with Mitsuba at 320x240, seed 7, into OUT/data, then
-trains the `smoke` config for its whole schedule into OUT/run-gdrnet; measured on 2 idle cores: about 6 min
-of rendering, 25-45 min of training, the machine's speed drifting, and 2 min of evaluation):
+Reproduce the figures of docs/benchmarks.md (renders 1000 samples with Mitsuba at 320x240, seed 7, into
+OUT/data, then trains the `smoke` config for its whole schedule into OUT/run-gdrnet; measured on 2 idle
+cores: about 6 min of rendering, 25-45 min of training, the machine's speed drifting, and 2 min of
+evaluation):
 
     python benchmarks/posenet_learning.py --out /tmp/learn
 

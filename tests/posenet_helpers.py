@@ -22,7 +22,7 @@ RESOLUTION = (320, 240)
 # The images the learning test's thresholds were measured on: an ideal camera, the procedural sky and
 # the CAD finishes (scgen's defaults before its camera, real sky and drawn finishes). Under the new
 # defaults 16 training images no longer generalise to the 8 held-out ones within the test's budget
-# (held-out mask IoU 0.34 vs the majority mask's 0.33, translation ratio 0.77; README, posenet): that is
+# (held-out mask IoU 0.34 vs the majority mask's 0.33, translation ratio 0.77; docs/benchmarks.md): that is
 # a finding about the data's difficulty, measured separately, not a regression of the learner.
 AS_BEFORE_REALISM = {
     "background": {"earth_map": "procedural", "stars": "procedural"},

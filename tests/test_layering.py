@@ -139,7 +139,7 @@ def test_no_library_module_imports_a_command_line() -> None:
 
 def test_the_readme_api_example_runs_as_written(tmp_path: Path) -> None:
     readme = (ROOT / "README.md").read_text()
-    section = readme[readme.index("### Python API") :]
+    section = readme[readme.index("## Python API") :]
     example = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     out = subprocess.run([sys.executable, "-c", example], capture_output=True, text=True, cwd=tmp_path)
     assert out.returncode == 0, out.stderr

@@ -7,7 +7,7 @@ best constant prediction and the rotation error stays at a random rotation's ~12
 2 CPU cores cannot teach rotation to generalise to held-out scenes, so rotation and xyz are measured on
 the training images; what does generalise in that budget, the visible mask and the translation, is
 measured on the 8 held-out (val and test) images against the best prediction that ignores the image.
-The held-out rotation figures come from `benchmarks/posenet_learning.py` (README).
+The held-out rotation figures come from `benchmarks/posenet_learning.py` (docs/benchmarks.md).
 """
 
 from __future__ import annotations
