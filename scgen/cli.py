@@ -11,6 +11,8 @@ from typing import Any
 
 import click
 
+from scgen.dataset.export import FORMATS as EXPORT_FORMATS
+from scgen.dataset.export.output import IMAGE_MODES
 from scgen.errors import ScgenError
 from scgen.scenes.camera_config import CAMERA_PRESETS
 from scgen.scenes.factors import FACTOR_GROUPS
@@ -302,15 +304,20 @@ def merge(out: Path, shards: tuple[Path, ...]) -> None:
     click.echo(f"{out}: {n}/{total} samples after merging {len(shards)} shard folder(s)")
 
 
-@main.command()
+@main.command(
+    help="Export a dataset to another toolchain's layout, keeping its train/val/test split "
+    "(docs/dataset.md).\n\n\b\n"
+    + "\n".join(f"{f.name}: {f.layout}" for f in EXPORT_FORMATS.values())
+    + "\n\nEvery image is decoded first: nothing is written when DATASET (one of its files unreadable), "
+    "--format or OUT is refused; OUT appears only once complete."
+)
 @click.argument("dataset", type=click.Path(path_type=Path))
 @click.option(
     "--format",
     "fmt",
     required=True,
-    metavar="speedplus|coco",
-    help="speedplus: SPEED+'s camera.json, images and train/validation/test labels; "
-    "coco: one COCO instances file per split (masks as RLE, factors per image).",
+    metavar="|".join(EXPORT_FORMATS),
+    help="; ".join(f"{f.name}: {f.summary}" for f in EXPORT_FORMATS.values()) + ".",
 )
 @click.option(
     "--out",
@@ -322,21 +329,13 @@ def merge(out: Path, shards: tuple[Path, ...]) -> None:
 @click.option(
     "--images",
     default=None,
-    metavar="copy|hardlink|symlink",
-    help="speedplus only: how the images get into OUT (default copy).",
+    metavar="|".join(IMAGE_MODES),
+    help=", ".join(f.name for f in EXPORT_FORMATS.values() if f.writes_images)
+    + " only: how the images get into OUT (default copy).",
 )
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @one_line_errors(ScgenError)
 def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | None, quiet: bool) -> None:
-    """Export a dataset to SPEED+ or COCO, keeping its train/val/test split (docs/dataset.md).
-
-    \b
-    speedplus: OUT/camera.json, OUT/synthetic/images/, OUT/synthetic/{train,validation,test}.json
-    coco:      OUT/instances_{train,val,test}.json (file_name relative to DATASET)
-
-    Every image is decoded first: nothing is written when DATASET (one of its files unreadable), --format
-    or OUT is refused; OUT appears only once complete.
-    """
     from scgen.dataset.export import export_dataset
 
     counts = export_dataset(dataset, fmt, out, overwrite, images, progress=not quiet)

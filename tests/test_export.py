@@ -20,6 +20,9 @@ from scipy.spatial.transform import Rotation
 
 from scgen.cli import main
 from scgen.dataset import bop
+from scgen.dataset.export import FORMATS
+from scgen.dataset.export.output import ExportFormat
+from scgen.dataset.export.source import Source
 from scgen.dataset.layout import Layout
 
 # SPEED+'s own camera.json distortion (k1, k2, p1, p2, k3), as a cam_dist the exporter must carry over
@@ -205,3 +208,27 @@ def test_a_dataset_with_an_image_that_cannot_be_read_is_refused(
     why = f"sample {rec['sample_id']}: cannot read {image}: truncated or not an image"
     assert code == 1 and lines == [f"Error: {why}"], lines
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+
+
+def test_a_format_is_one_registry_entry(small_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """The registry is the one list of formats: `--help` shows every entry's layout, and an entry added to it
+    is a working `--format`, its writer handed the decoded dataset and a staging folder that becomes OUT."""
+    help_text = CliRunner().invoke(main, ["export", "--help"]).output
+    for fmt in FORMATS.values():
+        assert f"{fmt.name}: {fmt.layout}" in help_text
+
+    def write_ids(source: Source, out: Path) -> dict[str, int]:
+        ids = {split: [s.sample_id for s in source.split(split)] for split in splits(small_dataset)}
+        (out / "ids.json").write_text(json.dumps(ids))
+        return {"ids.json": len(source.samples)}
+
+    monkeypatch.setitem(
+        FORMATS, "ids", ExportFormat("ids", "sample ids per split", "OUT/ids.json", write_ids)
+    )
+    code, lines = export(str(small_dataset), "--format", "ids", "--out", str(tmp_path / "ids"))
+    assert code == 0, lines
+    assert json.loads((tmp_path / "ids" / "ids.json").read_text()) == splits(small_dataset)
+    code, lines = export(
+        str(small_dataset), "--format", "ids", "--out", str(tmp_path / "x"), "--images", "copy"
+    )
+    assert code != 0 and "ids writes no images" in lines[0]

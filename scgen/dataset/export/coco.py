@@ -19,6 +19,7 @@ from pycocotools import mask as mask_utils
 
 import scgen
 from scgen.dataset import bop
+from scgen.dataset.export.output import ExportFormat
 from scgen.dataset.export.source import Sample, Source
 from scgen.dataset.image_file import why_unreadable
 from scgen.dataset.layout import OBJ_ID, dumps
@@ -91,3 +92,11 @@ def write(source: Source, out: Path) -> dict[str, int]:
         (out / instances_file(split)).write_text(dumps(content))
         counts[instances_file(split)] = len(content["images"])
     return counts
+
+
+FORMAT = ExportFormat(
+    name="coco",
+    summary="one COCO instances file per split (masks as RLE, factors per image)",
+    layout="OUT/instances_{train,val,test}.json (file_name relative to DATASET)",
+    write=write,
+)

@@ -4,14 +4,40 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from scgen.dataset.atomic import TMP_MARK
 from scgen.errors import ScgenError
 
+if TYPE_CHECKING:
+    from scgen.dataset.export.source import Source
+
 IMAGE_MODES = ("copy", "hardlink", "symlink")  # how exported images refer to the rendered ones
+
+
+@dataclass(frozen=True)
+class ExportFormat:
+    """One entry of `scgen export`'s registry (scgen.dataset.export.FORMATS): the CLI's choices and help
+    come from these. `write(source, out[, images])` fills `out` and returns the images per file written;
+    it takes an IMAGE_MODES value when `writes_images`."""
+
+    name: str
+    summary: str  # one line: what the format holds
+    layout: str  # what OUT holds, one line
+    write: Callable[..., dict[str, int]]
+    writes_images: bool = False
+
+    def run(self, source: Source, out: Path, images: str | None) -> dict[str, int]:
+        """Write `source` into `out`; `images` only where the format places image files."""
+        return (
+            self.write(source, out, images or IMAGE_MODES[0])
+            if self.writes_images
+            else self.write(source, out)
+        )
 
 
 def check_out(root: Path, out: Path, overwrite: bool) -> None:

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from scgen.dataset.export.output import place_image
+from scgen.dataset.export.output import ExportFormat, place_image
 from scgen.dataset.export.source import Sample, Source
 from scgen.dataset.layout import dumps
 from scgen.errors import ScgenError
@@ -72,3 +72,12 @@ def write(source: Source, out: Path, images: str) -> dict[str, int]:
         (out / DOMAIN / name).write_text(dumps([label(s) for s in samples]))
         counts[f"{DOMAIN}/{name}"] = len(samples)
     return counts
+
+
+FORMAT = ExportFormat(
+    name="speedplus",
+    summary="SPEED+'s camera.json, images and train/validation/test labels",
+    layout="OUT/camera.json, OUT/synthetic/images/, OUT/synthetic/{train,validation,test}.json",
+    write=write,
+    writes_images=True,
+)
