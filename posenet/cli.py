@@ -311,7 +311,7 @@ def bench(
 def export_cmd(ckpt: Path, onnx_path: Path) -> None:
     """Export a pose network to ONNX (opset 18, dynamic batch): inputs roi_img, roi_coord2d; outputs mask,
     xyz, region, rot6d, site. Checks onnxruntime's outputs against torch's on a random batch of 2."""
-    from posenet.export import OPSET, export_onnx, max_difference, onnx_session  # ~0.6 s: only here
+    from posenet.onnx_export import OPSET, export_onnx, max_difference, onnx_session  # ~0.6 s: only here
 
     model, _ = load_model(ckpt, torch.device("cpu"))
     export_onnx(model, onnx_path)

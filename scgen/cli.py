@@ -195,7 +195,7 @@ def render(
 def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: bool, xyz_dtype: str,
              quiet: bool) -> None:  # fmt: skip
     """Label any BOP dataset: xyz maps of every scene_gt instance, masks and scene_gt_info where missing."""
-    from scgen.run.bop_annotate import AnnotateJob, AnnotateOptions, disagreement_line, run_annotate
+    from scgen.run.annotate_job import AnnotateJob, AnnotateOptions, disagreement_line, run_annotate
 
     job = AnnotateJob(bop_dir, split, workers or os.cpu_count() or 1, AnnotateOptions(xyz_dtype, overwrite))
     s = run_annotate(job, progress=not quiet)

@@ -19,7 +19,7 @@ from scgen.cli import main
 from scgen.dataset import bop
 from scgen.dataset.exr import encode_xyz_exr, read_xyz_exr
 from scgen.dataset.validate import reprojection_error
-from scgen.run.bop_annotate import record_path
+from scgen.run.annotate_job import record_path
 from tests.bop_fixture import SPLIT, build_bop_dataset, first_hits, object_meshes
 
 

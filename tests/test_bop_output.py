@@ -23,7 +23,7 @@ from scgen.cli import main
 from scgen.dataset import bop
 from scgen.dataset.exr import read_xyz_exr
 from scgen.dataset.layout import Layout
-from scgen.dataset.models import EVAL_MAX_EDGE_FRAC
+from scgen.dataset.model_files import EVAL_MAX_EDGE_FRAC
 from scgen.dataset.validate import validate_dataset
 from scgen.dataset.writer import WriteOptions, finalize
 from scgen.render.base import create_backend

@@ -13,7 +13,7 @@ from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
 from posenet.evaluate import load_model
-from posenet.export import OUTPUTS, onnx_session, run_onnx
+from posenet.onnx_export import OUTPUTS, onnx_session, run_onnx
 
 
 def assert_same_outputs(model: torch.nn.Module, path: Path, batches: tuple[int, ...] = (1, 3)) -> None:

@@ -14,7 +14,7 @@ import trimesh
 
 from scgen.assets import ASSET_DIR
 from scgen.dataset.layout import OBJ_ID
-from scgen.dataset.models import write_model_dir
+from scgen.dataset.model_files import write_model_dir
 from scgen.scenes.model import TargetModel, normalise_parts
 
 

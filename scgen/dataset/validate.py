@@ -19,7 +19,7 @@ from scgen.dataset.bop_dataset import BopDataset, BopImage, is_bop_dataset, open
 from scgen.dataset.exr import read_xyz_exr
 from scgen.dataset.image_file import read_image, why_unreadable
 from scgen.dataset.layout import OBJ_ID, Layout, open_dataset, read_metadata
-from scgen.dataset.models import EVAL_MAX_EDGE_FRAC
+from scgen.dataset.model_files import EVAL_MAX_EDGE_FRAC
 from scgen.dataset.writer import TargetImage, dataset_target, target_images, target_lists
 from scgen.errors import ScgenError
 from scgen.run.parent_watch import spawn_pool

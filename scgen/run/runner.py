@@ -17,7 +17,7 @@ import scgen
 from scgen.dataset.atomic import atomic_write_text, remove_stale_temporaries
 from scgen.dataset.bop import read_json
 from scgen.dataset.layout import FORMAT, MANIFEST, OBJ_ID, Layout, dumps
-from scgen.dataset.models import write_eval_model_dir, write_model_dir
+from scgen.dataset.model_files import write_eval_model_dir, write_model_dir
 from scgen.dataset.splits import SPLITS, plan_splits, split_lists
 from scgen.dataset.writer import WriteOptions, dataset_depth_scale, existing_sample_ids, finalize
 from scgen.errors import ScgenError

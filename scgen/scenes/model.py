@@ -1,4 +1,4 @@
-"""The target model: any mesh, loaded and normalised to the fixed object frame (BOP files: dataset.models).
+"""The target model: any mesh, loaded and normalised to the fixed object frame (its BOP files: model_files).
 
 The object frame is centred on the bounding-box centre and scaled so the model's diameter (the
 largest distance between two of its points) equals a fixed value; every pose refers to it.
