@@ -2,7 +2,7 @@
 kernels each sample launches and compiles; then, at 640x480, throughput, time outside the renderer, bytes
 per sample by file kind and the float16-vs-float32 xyz storage error.
 
-Each size renders in a fresh worker process, as `scgen render` runs it (scgen.run.parent_watch.spawn_pool),
+Each size renders in a fresh worker process, as `scgen render` runs it (scgen.io.parent_watch.spawn_pool),
 with --threads renderer threads: one unless given, as a worker of `scgen render` renders
 (MITSUBA_THREADS). With more than one, Dr.Jit's idle pool threads busy-wait for a while after each kernel
 before they sleep, on cores the worker's own numpy work (backgrounds, the camera stage) then shares, and
@@ -28,8 +28,8 @@ from scgen.dataset.splits import plan_splits
 from scgen.dataset.validate import reprojection_error
 from scgen.dataset.writer import WriteOptions, finalize, write_sample
 from scgen.generator import Generator
+from scgen.io.parent_watch import spawn_pool
 from scgen.render.base import create_backend
-from scgen.run.parent_watch import spawn_pool
 from scgen.run.runner import write_static_files
 from scgen.scenes import load_config
 from scgen.scenes.factors import spec_key

@@ -27,8 +27,8 @@ from posenet.detection.detector import load_detector_config, visible_boxes
 from posenet.detection.train import BEST, train_detector
 from posenet.evaluate import EvalResult, evaluate, format_table, summary_rows
 from posenet.train import LAST
-from scgen.dataset.atomic import atomic_write_text
 from scgen.dataset.stats import sample_groups
+from scgen.io.atomic import atomic_write_text
 
 # issue 21's floors for the CPU preset on the test split (and its training takes <= 20 min on 2 cores)
 FLOOR_MEAN_IOU = 0.75  # with bbox_visib, a miss counting 0

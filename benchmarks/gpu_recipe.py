@@ -41,9 +41,9 @@ from posenet.errors import PosenetError
 from posenet.evaluate import by_factor, by_factor_table, evaluate, format_table, summary_rows
 from posenet.models.backbone import initial_weights
 from posenet.train import LAST, LOG_FILE, train
-from scgen.dataset.atomic import atomic_write_text
 from scgen.dataset.stats import sample_groups
 from scgen.errors import ScgenError
+from scgen.io.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 
 CORES = os.cpu_count() or 1

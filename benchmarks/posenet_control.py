@@ -70,7 +70,7 @@ from posenet.geometry import roi_translation
 from posenet.metrics import add_error, depth_error_rel, rotation_error_deg, translation_error
 from posenet.ransac import MIN_POINTS
 from posenet.train import train
-from scgen.dataset.atomic import atomic_write_text
+from scgen.io.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 from scgen.scenes.attitude import nominal_rotation, ray_rotation
 

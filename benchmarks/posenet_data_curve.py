@@ -32,7 +32,7 @@ from posenet.data.dataset import first_images
 from posenet.data.layout import scan_split
 from posenet.evaluate import evaluate
 from posenet.train import LAST, train
-from scgen.dataset.atomic import atomic_write_text
+from scgen.io.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 
 N, SIZES, TEST_N, STEPS = 30000, (700, 2100, 7000, 21000), 1000, 10440

@@ -54,9 +54,9 @@ from posenet.errors import PosenetError
 from posenet.evaluate import by_factor, evaluate, format_table, summary_rows
 from posenet.losses import LOSS_TERMS
 from posenet.train import LAST, LOG_FILE, steps_per_epoch, train
-from scgen.dataset.atomic import atomic_write_text
 from scgen.dataset.stats import sample_groups
 from scgen.errors import ScgenError
+from scgen.io.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 
 CURVE_POINTS = 8  # default number of evaluations over the run

@@ -39,7 +39,7 @@ from posenet_learning import BACKEND, RENDER_N, RESOLUTION, SEED, WORKERS
 from posenet.evaluate import evaluate, format_table
 from posenet.losses import LOSS_TERMS
 from posenet.train import LOG_FILE
-from scgen.dataset.atomic import atomic_write_text
+from scgen.io.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 
 LEARNING = Path(__file__).with_name("posenet_learning.py")

@@ -10,7 +10,7 @@ import torch
 
 from posenet.errors import PosenetError
 from posenet.models import ModelConfig
-from scgen.dataset.atomic import atomic_write_bytes
+from scgen.io import atomic_write_bytes
 
 REQUIRED = ("model", "model_config", "config", "step")
 

@@ -36,8 +36,7 @@ from posenet.ransac import PNP_LABELS, PNP_METHODS
 from posenet.train import train as run_train
 from posenet.viz import heatmap_panel, overlay_panel
 from scgen.cli import one_line_errors
-from scgen.dataset.atomic import atomic_write_text
-from scgen.errors import ScgenError
+from scgen.io import ScgenError, atomic_write_text
 
 PATH = click.Path(path_type=Path)
 

@@ -32,7 +32,7 @@ from posenet.geometry import decode_pose
 from posenet.metrics import TURNED_DEG, headline_add, sample_errors, summarise
 from posenet.models import PoseNet, create_model
 from posenet.ransac import PNP_LABELS, ransac_poses
-from scgen.dataset import bop
+from scgen.io import bop
 
 BATCH_SIZE = 32
 LATENCY_WARMUP = 5  # untimed batch-1 forwards (allocator, cuDNN autotuning)

@@ -36,7 +36,7 @@ from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.losses import LOSS_TERMS, PmObject, pose_losses
 from posenet.models import PoseNet, create_model
-from scgen.dataset.atomic import atomic_write_text
+from scgen.io import atomic_write_text
 
 LOG_FILE = "train_log.jsonl"
 LAST = "last.pt"

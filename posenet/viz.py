@@ -17,7 +17,7 @@ from posenet.data.layout import Instance, scan_split
 from posenet.errors import PosenetError
 from posenet.evaluate import evaluate, load_model
 from posenet.featviz import model_feature_response
-from scgen.dataset import bop
+from scgen.io import bop
 
 GT_COLOUR = (255, 255, 255)  # BGR
 PRED_COLOUR = (60, 220, 60)

@@ -269,9 +269,9 @@ def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_grou
     """Group counts of the robustness factors (the help lists scgen.scenes.factors.FACTOR_GROUPS)."""
     import json
 
-    from scgen.dataset.atomic import atomic_write_text
     from scgen.dataset.stats import compute_stats, format_table, to_csv, write_plots
     from scgen.dataset.stats import sample_groups as draw_groups
+    from scgen.io.atomic import atomic_write_text
 
     result = compute_stats(dataset, split, min_group)
     click.echo(format_table(result))

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from scgen.annotate import Annotation, annotate
-from scgen.render.buffers import Buffers
+from scgen.io.buffers import Buffers
 from scgen.scenes import SceneSpec, TargetShape, load_config, sample_scene
 from scgen.scenes.model import TargetModel, load_target
 

@@ -17,7 +17,7 @@ import trimesh
 from scipy.spatial.distance import pdist
 from trimesh.ray.ray_triangle import RayMeshIntersector
 
-from scgen.dataset import bop
+from scgen.io import bop
 from scgen.scenes.geometry import random_rotation
 
 SPLIT = "test"

@@ -16,10 +16,11 @@ import trimesh
 from click.testing import CliRunner
 
 from scgen.cli import main
-from scgen.dataset import bop
-from scgen.dataset.exr import encode_xyz_exr, read_xyz_exr
 from scgen.dataset.validate import reprojection_error
+from scgen.io import bop
+from scgen.io.exr import encode_xyz_exr, read_xyz_exr
 from scgen.run.annotate_job import record_path
+from scgen.scenes.spec import CameraSpec
 from tests.bop_fixture import SPLIT, build_bop_dataset, first_hits, object_meshes
 
 
@@ -90,7 +91,7 @@ def test_xyz_maps_reproject_onto_their_pixels_and_lie_on_the_mesh(annotated: Pat
             vs, us = np.nonzero(visib)
             C = crop[vs, us].astype(np.float64)
             R, t = bop.gt_pose(entry)
-            camera = bop.camera_spec({"cam_K": np.ravel(K).tolist()}, *visib.shape[::-1])
+            camera = CameraSpec.from_scene_camera({"cam_K": np.ravel(K).tolist()}, *visib.shape[::-1])
             assert (reprojection_error(C, us + x, vs + y, camera, R, t) <= 0.5).mean() >= 0.995
             _, dist, _ = trimesh.proximity.closest_point(meshes[entry["obj_id"]], C)
             assert dist.max() <= 0.005 * diameters[entry["obj_id"]]

@@ -12,11 +12,11 @@ import trimesh
 
 from scgen.errors import ScgenError
 from scgen.generator import Generator
+from scgen.io.buffers import TARGET_ID
 from scgen.render.backgrounds import srgb_to_linear
 from scgen.render.base import create_backend
 from scgen.render.blender import BlenderBackend
 from scgen.render.blender_env import import_bpy, select_device
-from scgen.render.buffers import TARGET_ID
 from scgen.render.lighting import exposure_scale, sun_render_irradiance
 from scgen.render.mitsuba_backend import MitsubaBackend, select_variant
 from scgen.scenes import load_config

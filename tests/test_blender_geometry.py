@@ -14,8 +14,8 @@ import trimesh
 
 from scgen.annotate.annotate import annotate
 from scgen.generator import Generator
+from scgen.io.buffers import TARGET_ID
 from scgen.render.blender import BlenderBackend
-from scgen.render.buffers import TARGET_ID
 from scgen.render.mitsuba_backend import MitsubaBackend
 from scgen.scenes import load_config
 from scgen.scenes.model import load_target

@@ -20,12 +20,12 @@ from posenet.data import open_split
 from posenet.data.crop import box_center
 from scgen.annotate.annotate import covered_pixels, mask_bbox
 from scgen.cli import main
-from scgen.dataset import bop
-from scgen.dataset.exr import read_xyz_exr
 from scgen.dataset.layout import Layout
 from scgen.dataset.model_files import EVAL_MAX_EDGE_FRAC
 from scgen.dataset.validate import validate_dataset
 from scgen.dataset.writer import WriteOptions, finalize
+from scgen.io import bop
+from scgen.io.exr import read_xyz_exr
 from scgen.render.base import create_backend
 from scgen.scenes.config import distance_range_m
 from scgen.scenes.geometry import project

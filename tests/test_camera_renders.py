@@ -16,13 +16,14 @@ from click.testing import CliRunner
 from posenet.data.layout import scan_split
 from posenet.errors import PosenetError
 from scgen.cli import main
-from scgen.dataset import bop
-from scgen.dataset.exr import read_xyz_exr
 from scgen.dataset.layout import Layout
 from scgen.dataset.validate import reprojection_error, validate_dataset
 from scgen.generator import Generator
+from scgen.io import bop
+from scgen.io.exr import read_xyz_exr
 from scgen.run.runner import RenderJob, run_render
 from scgen.scenes.camera_config import camera_preset
+from scgen.scenes.spec import CameraSpec
 
 BEFORE = Path(__file__).parent / "data" / "rgb_before_camera_stage.json"
 # the sky and finish as they were when BEFORE was recorded (procedural Earth and stars, CAD finishes)
@@ -93,8 +94,8 @@ def test_speedplus_camera_keeps_labels_exact_through_its_lens(tmp_path: Path, ba
         crop = read_xyz_exr(layout.xyz(rec["split"], rec["sample_id"]))
         vs, us = np.nonzero(np.abs(crop).max(axis=-1) > 0)
         R, t = bop.gt_pose(rec["scene_gt"][0])
-        lens = bop.camera_spec(rec["scene_camera"], 480, 300)
-        pinhole = bop.camera_spec({"cam_K": rec["scene_camera"]["cam_K"]}, 480, 300)
+        lens = CameraSpec.from_scene_camera(rec["scene_camera"], 480, 300)
+        pinhole = CameraSpec.from_scene_camera({"cam_K": rec["scene_camera"]["cam_K"]}, 480, 300)
         C = crop[vs, us].astype(np.float64)
         through_lens = reprojection_error(C, us + x, vs + y, lens, R, t)
         without = reprojection_error(C, us + x, vs + y, pinhole, R, t)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from scgen.errors import ScgenError
-from scgen.render.buffers import TARGET_ID
+from scgen.io.buffers import TARGET_ID
 from scgen.render.camera import glare, optics
 from scgen.render.camera.characterise import photon_transfer
 from scgen.render.camera.exposure import exposure_shift_ev, luminance

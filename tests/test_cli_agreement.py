@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from posenet.cli import main as posenet
 from scgen.cli import main as scgen
-from scgen.dataset.layout import NOT_A_FOLDER, not_a_dataset
+from scgen.io import NOT_A_FOLDER, not_a_dataset
 
 
 def invoke(cli, *args: str | Path) -> tuple[int, list[str]]:

@@ -19,11 +19,11 @@ from pycocotools.cocoeval import COCOeval
 from scipy.spatial.transform import Rotation
 
 from scgen.cli import main
-from scgen.dataset import bop
 from scgen.dataset.export import FORMATS
 from scgen.dataset.export.output import ExportFormat
 from scgen.dataset.export.source import Source
 from scgen.dataset.layout import Layout
+from scgen.io import bop
 
 # SPEED+'s own camera.json distortion (k1, k2, p1, p2, k3), as a cam_dist the exporter must carry over
 SPEEDPLUS_DIST = [-0.22383016606510672, 0.5140979708255638, -0.0006649961199834066, -0.00021404771667484594,

@@ -10,8 +10,8 @@ import pytest
 
 from scgen.dataset.stats import compute_stats
 from scgen.generator import Generator
+from scgen.io.buffers import BACKGROUND_ID
 from scgen.render.backgrounds import srgb_to_linear
-from scgen.render.buffers import BACKGROUND_ID
 from scgen.render.mitsuba_materials import CRINKLE_SLOPE, crinkle_normal_map, crinkle_normal_tensor
 from scgen.run.runner import RenderJob, run_render
 from scgen.scenes import load_config

@@ -1,4 +1,5 @@
-"""The never-rules, checked on the real import graph, and the README's API example, run as written."""
+"""The floors and never-rules, checked on the real import graph, and the README's API example, run as
+written."""
 
 from __future__ import annotations
 
@@ -13,8 +14,21 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 RENDERERS = ("bpy", "mitsuba", "drjit", "scgen.render")
-# what a renderer hands on (Buffers): the one scgen.render module annotation and the writer import
-RENDER_OUTPUT = {"scgen.render", "scgen.render.buffers"}
+# scgen's floors, bottom first (docs/architecture.md): a module imports from its own floor and those below
+# only. "scgen" is the package root alone (its version; Generator is a lazy attribute).
+FLOORS = (
+    ("scgen", "scgen.errors", "scgen.io"),
+    ("scgen.scenes",),
+    ("scgen.render",),
+    ("scgen.annotate",),
+    ("scgen.generator",),
+    ("scgen.dataset",),
+    ("scgen.run",),
+    ("scgen.assets", "scgen.preview", "scgen.doctor", "scgen.cli"),
+)
+# the package root's lazy `scgen.Generator` (__getattr__): the API's front door, loaded on first use only
+FRONT_DOOR = "scgen -> scgen.generator"
+POSENET_GATE = "scgen.io"  # the one module posenet reads scgen datasets through
 CLI_MODULES = {"scgen/cli.py", "posenet/cli.py", "posenet/console.py"}
 CLI_IMPORTS = {"click", "scgen.cli", "posenet.cli"}
 
@@ -34,14 +48,14 @@ def loaded_modules(*modules: str) -> set[str]:
             "scgen.annotate",
             "scgen.annotate.bop_labels",
             "scgen.scenes.factors",
-            "scgen.dataset.bop",
+            "scgen.io",
             "scgen.dataset.bop_dataset",
         ),
     ],
     ids=["scenes-annotate"],
 )
 def test_no_renderer_is_imported(modules: tuple[str, ...]) -> None:
-    assert renderer_modules(loaded_modules(*modules)) - RENDER_OUTPUT == set()
+    assert renderer_modules(loaded_modules(*modules)) == set()
 
 
 def renderer_modules(names: set[str]) -> set[str]:
@@ -105,6 +119,54 @@ def import_cycle(root: Path, packages: tuple[str, ...]) -> list[str]:
     except graphlib.CycleError as exc:
         return list(exc.args[1])
     return []
+
+
+def floor(name: str, floors: tuple[tuple[str, ...], ...]) -> int | None:
+    """The index of the floor holding module `name` (a package root holds only itself), or None."""
+    for level, prefixes in enumerate(floors):
+        if any(name == p or (name.startswith(p + ".") and "." in p) for p in prefixes):
+            return level
+    return None
+
+
+def upward_imports(root: Path, package: str, floors: tuple[tuple[str, ...], ...]) -> list[str]:
+    """'module -> imported' for every import of a higher floor, at any depth (lazy imports too)."""
+    paths = {module_name(root, p): p for p in (root / package).rglob("*.py")}
+    found = []
+    for name, path in sorted(paths.items()):
+        for target in sorted(module_imports(ast.parse(path.read_text()), set(paths))):
+            if floor(target, floors) is not None and floor(target, floors) > floor(name, floors):
+                found.append(f"{name} -> {target}")
+    return found
+
+
+def test_scgen_imports_only_downward() -> None:
+    modules = {module_name(ROOT, p) for p in (ROOT / "scgen").rglob("*.py")}
+    assert [m for m in sorted(modules) if floor(m, FLOORS) is None] == []  # every module has a floor
+    assert upward_imports(ROOT, "scgen", FLOORS) == [FRONT_DOOR]
+    assert "scgen.generator" not in loaded_modules("scgen")
+
+
+def test_the_floor_check_sees_an_upward_import(tmp_path: Path) -> None:
+    (tmp_path / "pkg").mkdir()
+    files = {"__init__": "", "low": "def f():\n    from pkg.high import g\n", "mid": "from pkg import low\n",
+             "high": "import pkg.low\n"}  # fmt: skip
+    for name, text in files.items():
+        (tmp_path / "pkg" / f"{name}.py").write_text(text)
+    floors = (("pkg", "pkg.low"), ("pkg.mid",), ("pkg.high",))
+    assert upward_imports(tmp_path, "pkg", floors) == ["pkg.low -> pkg.high"]
+
+
+def test_posenet_reads_scgen_through_one_module() -> None:
+    """posenet imports scgen only through scgen.io (the BOP reader, atomic writes, EXR, images, the dataset
+    errors), and its command line scgen.cli's one-line errors."""
+    paths = sorted(ROOT.glob("posenet/**/*.py"))
+    reached = {
+        f"{p.relative_to(ROOT)}: {n}" for p in paths for n in imported_names(p) if n.split(".")[0] == "scgen"
+    }
+    assert reached - {f"{p.relative_to(ROOT)}: {POSENET_GATE}" for p in paths} == {
+        "posenet/cli.py: scgen.cli"
+    }
 
 
 def test_no_import_cycles() -> None:

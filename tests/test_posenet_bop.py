@@ -23,7 +23,7 @@ from posenet.evaluate import bop_results_csv, per_image_times
 from posenet.geometry import rot6d_to_mat
 from posenet.losses import PmObject, closest_symmetric_rotation, pm_loss
 from posenet.metrics import sample_errors, summarise
-from scgen.dataset import bop
+from scgen.io import bop
 
 TINY = """\
 preset: smoke

@@ -8,8 +8,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 from scgen.generator import Generator
+from scgen.io.buffers import BACKGROUND_ID
 from scgen.render.backgrounds import background_image
-from scgen.render.buffers import BACKGROUND_ID
 from scgen.render.earth_surface import CLOUD_THRESHOLD, cloud_cover, disc_albedo
 from scgen.render.lighting import SOLAR_CONSTANT, body_albedo_light, exposure_scale
 from scgen.render.stars import SUN_V, pixel_solid_angle, project_stars, star_image, tint

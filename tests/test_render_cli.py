@@ -18,9 +18,9 @@ from click.testing import CliRunner
 
 from scgen.annotate import annotate
 from scgen.cli import main
-from scgen.dataset.bop import read_json
-from scgen.dataset.exr import encode_xyz_exr, read_xyz_exr
 from scgen.dataset.layout import Layout
+from scgen.io.bop import read_json
+from scgen.io.exr import encode_xyz_exr, read_xyz_exr
 from scgen.render.base import create_backend
 from scgen.scenes import SceneSpec, load_config, sample_scene
 from scgen.scenes.model import load_target

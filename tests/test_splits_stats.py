@@ -10,10 +10,10 @@ import pytest
 from click.testing import CliRunner
 
 from scgen.cli import main
-from scgen.dataset.bop import read_json
 from scgen.dataset.layout import read_metadata
 from scgen.dataset.splits import leakage, plan_splits
 from scgen.generator import Generator
+from scgen.io.bop import read_json
 from scgen.scenes import load_config
 from scgen.scenes.factors import FACTOR_GROUPS, combination_key, spec_key, viewpoint_cell, viewpoint_cells
 from scgen.scenes.geometry import quat_to_matrix

@@ -8,8 +8,7 @@ import cv2
 import numpy as np
 
 from posenet.errors import PosenetError
-from scgen.dataset.exr import read_xyz_exr
-from scgen.dataset.image_file import read_image, why_unreadable
+from scgen.io import read_image, read_xyz_exr, why_unreadable
 
 
 def unreadable(kind: str, path: Path) -> PosenetError:

@@ -11,8 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from posenet.errors import PosenetError
-from scgen.dataset import bop
-from scgen.dataset.layout import NOT_A_FOLDER, not_a_dataset
+from scgen.io import NOT_A_FOLDER, bop, not_a_dataset
 
 MAKE_ONE = "(make one with `scgen render`, or bring a BOP dataset with xyz maps: docs/dataset.md)"
 

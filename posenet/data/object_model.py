@@ -15,8 +15,7 @@ import trimesh
 
 from posenet.data.layout import MAKE_ONE
 from posenet.errors import PosenetError
-from scgen.dataset import bop
-from scgen.dataset.layout import NOT_A_FOLDER, not_a_dataset
+from scgen.io import NOT_A_FOLDER, bop, not_a_dataset
 
 SURFACE_POINTS_SEED = 0  # fixed: the PM loss and ADD / ADD-S see the same points in every run
 

@@ -38,7 +38,7 @@ from posenet.train import (
     stop_step,
     worker_init,
 )
-from scgen.dataset.atomic import atomic_write_text
+from scgen.io import atomic_write_text
 
 BEST = "best.pt"
 

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scgen.dataset import bop
-from scgen.render.buffers import TARGET_ID, Buffers
+from scgen.io import bop
+from scgen.io.buffers import TARGET_ID, Buffers
 from scgen.scenes.factors import occlusion_group, shadow_label
 from scgen.scenes.spec import CameraSpec, SceneSpec
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from scgen.annotate.annotate import backproject_to_model, mask_bbox
-from scgen.dataset import bop
+from scgen.io import bop
 from scgen.scenes.geometry import project
 from scgen.scenes.spec import CameraSpec
 

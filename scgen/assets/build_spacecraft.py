@@ -12,10 +12,9 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from scgen.assets import ASSET_DIR
 from scgen.dataset.layout import OBJ_ID
 from scgen.dataset.model_files import write_model_dir
-from scgen.scenes.model import TargetModel, normalise_parts
+from scgen.scenes.model import BUNDLED_MODEL_DIR, TargetModel, normalise_parts
 
 
 def _box(extents, centre, material: str) -> tuple[str, trimesh.Trimesh]:
@@ -99,8 +98,9 @@ def build_spacecraft() -> TargetModel:
 
 def main() -> None:
     model = build_spacecraft()
-    write_model_dir(model, ASSET_DIR, OBJ_ID)
-    print(f"wrote {ASSET_DIR}: {len(model.mesh.faces)} triangles, diameter {model.diameter * 1000:.1f} mm")
+    write_model_dir(model, BUNDLED_MODEL_DIR, OBJ_ID)
+    size = f"{len(model.mesh.faces)} triangles, diameter {model.diameter * 1000:.1f} mm"
+    print(f"wrote {BUNDLED_MODEL_DIR}: {size}")
 
 
 if __name__ == "__main__":

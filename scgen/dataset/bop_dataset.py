@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from scgen.dataset import bop
 from scgen.errors import ScgenError
+from scgen.io import bop
 from scgen.scenes.spec import CameraSpec
 
 

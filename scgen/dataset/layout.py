@@ -9,9 +9,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from scgen.dataset import bop
-from scgen.dataset.bop import read_json
 from scgen.errors import ScgenError
+from scgen.io import bop
+from scgen.io.bop import NOT_A_FOLDER, not_a_dataset, read_json
 
 MANIFEST = "scgen.json"
 # 2: depth by default, scene_gt_info in bop_toolkit's conventions, models_eval/, test targets
@@ -97,14 +97,6 @@ def bytes_by_kind(root: str | Path) -> dict[str, int]:
 def dumps(obj: Any) -> str:
     """Canonical JSON (sorted keys, fixed indent) so identical content gives identical bytes."""
     return json.dumps(obj, indent=1, sort_keys=True) + "\n"
-
-
-NOT_A_FOLDER = "does not exist or is not a directory"
-
-
-def not_a_dataset(root: str | Path, why: str) -> str:
-    """The one wording of both CLIs (scgen, posenet) for a dataset argument that is not one."""
-    return f"not a dataset folder: {root} {why}"
 
 
 def open_dataset(root: str | Path) -> tuple[Layout, dict[str, Any]]:

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from scgen.dataset import bop
-from scgen.dataset.atomic import atomic_write_bytes, atomic_write_text
+from scgen.io import bop
+from scgen.io.atomic import atomic_write_bytes, atomic_write_text
 from scgen.scenes.materials import MATERIALS
 from scgen.scenes.model import PARTS_FILE, TargetModel
 

@@ -13,16 +13,16 @@ import trimesh
 from tqdm import tqdm
 
 from scgen.annotate.annotate import full_projection
-from scgen.dataset import bop
-from scgen.dataset.bop import read_json
 from scgen.dataset.bop_dataset import BopDataset, BopImage, is_bop_dataset, open_bop_dataset
-from scgen.dataset.exr import read_xyz_exr
-from scgen.dataset.image_file import read_image, why_unreadable
 from scgen.dataset.layout import OBJ_ID, Layout, open_dataset, read_metadata
 from scgen.dataset.model_files import EVAL_MAX_EDGE_FRAC
 from scgen.dataset.writer import TargetImage, dataset_target, target_images, target_lists
 from scgen.errors import ScgenError
-from scgen.run.parent_watch import spawn_pool
+from scgen.io import bop
+from scgen.io.bop import read_json
+from scgen.io.exr import read_xyz_exr
+from scgen.io.image_file import read_image, why_unreadable
+from scgen.io.parent_watch import spawn_pool
 from scgen.scenes.spec import CameraSpec
 
 REPROJ_TOL_PX = 0.5
@@ -184,7 +184,7 @@ def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], 
     if rec["scene_camera"]["depth_scale"] != depth_scale:
         out.append(f"depth_scale {rec['scene_camera']['depth_scale']} != camera.json's {depth_scale}")
     R, t = bop.gt_pose(rec["scene_gt"][0])
-    camera = bop.camera_spec(rec["scene_camera"], mask.shape[1], mask.shape[0])
+    camera = CameraSpec.from_scene_camera(rec["scene_camera"], mask.shape[1], mask.shape[0])
     whole = full_projection(mask, camera, vertices @ R.T + t, faces)
     valid = int(mask.sum()) if depth is None else int((mask & (depth > 0)).sum())
     out += check_gt_info(info, visib, whole, valid)
@@ -253,7 +253,7 @@ def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: d
               lo: np.ndarray, hi: np.ndarray) -> list[str]:  # fmt: skip
     """xyz must reproject onto its own pixels and lie inside the model's bounding box."""
     R, t = bop.gt_pose(rec["scene_gt"][0])
-    camera = bop.camera_spec(rec["scene_camera"], *vis.shape[::-1])
+    camera = CameraSpec.from_scene_camera(rec["scene_camera"], *vis.shape[::-1])
     vs, us = np.nonzero(vis)
     C = crop[vs, us].astype(np.float64)
     err = reprojection_error(C, us + offset[0], vs + offset[1], camera, R, t)
@@ -357,7 +357,7 @@ def check_bop_xyz(scene: Path, image: BopImage, k: int, visib: np.ndarray, info:
     if len(vs) == 0:
         return out
     C = crop[vs, us].astype(np.float64)
-    camera = bop.camera_spec({"cam_K": image.K}, *visib.shape[::-1])
+    camera = CameraSpec.from_scene_camera({"cam_K": image.K}, *visib.shape[::-1])
     err = reprojection_error(C, us + x, vs + y, camera, *pose)
     share = float((err <= REPROJ_TOL_PX).mean())
     if share < REPROJ_MIN_SHARE:

@@ -23,12 +23,12 @@ import numpy as np
 
 from scgen.annotate import Annotation
 from scgen.annotate.annotate import full_projection
-from scgen.dataset import bop
-from scgen.dataset.atomic import atomic_write_bytes, atomic_write_text
-from scgen.dataset.bop import read_json
-from scgen.dataset.exr import encode_xyz_exr
 from scgen.dataset.layout import CHUNK, OBJ_ID, Layout, dumps
-from scgen.render.buffers import Buffers, CameraRecord
+from scgen.io import bop
+from scgen.io.atomic import atomic_write_bytes, atomic_write_text
+from scgen.io.bop import read_json
+from scgen.io.buffers import Buffers, CameraRecord
+from scgen.io.exr import encode_xyz_exr
 from scgen.scenes.attitude import CONE_COLUMNS
 from scgen.scenes.config import distance_range_m
 from scgen.scenes.factors import FLARE_LABELS, noise_group, occluder_config, spec_key, viewpoint_cell

@@ -7,7 +7,7 @@ import os
 from typing import Protocol
 
 from scgen.errors import ScgenError
-from scgen.render.buffers import Buffers
+from scgen.io.buffers import Buffers
 from scgen.render.conventions import MITSUBA_THREADS
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec

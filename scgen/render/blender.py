@@ -17,11 +17,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.backgrounds import background_image
 from scgen.render.blender_env import import_bpy, select_device
 from scgen.render.blender_scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender_settings import preset
-from scgen.render.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.camera import record_image, render_camera
 from scgen.scenes.geometry import project
 from scgen.scenes.model import TargetModel

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import OpenEXR
 
+from scgen.io.buffers import TARGET_ID
 from scgen.render.blender_env import quiet_stdout
 from scgen.render.blender_frames import camera_matrix_world, intrinsics_from_K, light_matrix_world
 from scgen.render.blender_materials import build_materials, new_material, probe_material, set_finish
@@ -34,7 +35,6 @@ from scgen.render.blender_settings import (
     configure_beauty,
     configure_common,
 )
-from scgen.render.buffers import TARGET_ID
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, render_seed
 from scgen.render.lighting import body_albedo_light, sun_render_irradiance
 from scgen.render.props import prop_mesh

@@ -23,8 +23,8 @@ import mitsuba as mi
 import numpy as np
 from trimesh.transformations import transform_points
 
+from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.backgrounds import background_image
-from scgen.render.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.camera import record_image, render_camera
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, MITSUBA_THREADS, check_quality, render_seed
 from scgen.render.mitsuba_lights import SceneLights, light_radius, sample_lights

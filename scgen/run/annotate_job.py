@@ -29,16 +29,16 @@ import numpy as np
 from tqdm import tqdm
 
 from scgen.annotate.bop_labels import InstanceLabels, VisibDisagreement, instance_labels, projection_box
-from scgen.dataset import bop
-from scgen.dataset.atomic import atomic_write_bytes, atomic_write_text, remove_stale_temporaries
-from scgen.dataset.bop import read_json
 from scgen.dataset.bop_dataset import BopDataset, BopImage, open_bop_dataset, read_models
-from scgen.dataset.exr import encode_xyz_exr
 from scgen.dataset.layout import dumps
 from scgen.dataset.writer import encode_png
 from scgen.errors import ScgenError
+from scgen.io import bop
+from scgen.io.atomic import atomic_write_bytes, atomic_write_text, remove_stale_temporaries
+from scgen.io.bop import read_json
+from scgen.io.exr import encode_xyz_exr
+from scgen.io.parent_watch import spawn_pool
 from scgen.render import raycast
-from scgen.run.parent_watch import spawn_pool
 
 RECORDS_DIR = "annotate"
 Models = dict[int, tuple[np.ndarray, np.ndarray]]

@@ -12,7 +12,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 
 from scgen.errors import ScgenError
-from scgen.run.parent_watch import spawn_pool
+from scgen.io.parent_watch import spawn_pool
 from scgen.run.worker import Done, SampleWorker, Task, WorkerSettings
 
 MAX_ATTEMPTS = 3  # a sample is tried at most this often before the run stops

@@ -14,18 +14,18 @@ from typing import Any
 from tqdm import tqdm
 
 import scgen
-from scgen.dataset.atomic import atomic_write_text, remove_stale_temporaries
-from scgen.dataset.bop import read_json
 from scgen.dataset.layout import FORMAT, MANIFEST, OBJ_ID, Layout, dumps
 from scgen.dataset.model_files import write_eval_model_dir, write_model_dir
 from scgen.dataset.splits import SPLITS, plan_splits, split_lists
 from scgen.dataset.writer import WriteOptions, dataset_depth_scale, existing_sample_ids, finalize
 from scgen.errors import ScgenError
 from scgen.generator import Generator
+from scgen.io.atomic import atomic_write_text, remove_stale_temporaries
+from scgen.io.bop import read_json
+from scgen.io.parent_watch import spawn_pool
 from scgen.render.base import check_backend, renderer_threads
 from scgen.render.conventions import check_quality
 from scgen.run.executors import run_local, run_ray
-from scgen.run.parent_watch import spawn_pool
 from scgen.run.worker import Done, Task, WorkerSettings
 from scgen.scenes.factors import spec_key
 from scgen.scenes.spec import SceneSpec

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 
-DIST_KEYS = ("k1", "k2", "p1", "p2", "k3")  # OpenCV order, as scene_camera.json's cam_dist
 NEWTON_STEPS = 30
 NEWTON_TOL = 1e-13  # normalised units: ~1e-10 px at fx 3000
 

@@ -8,14 +8,18 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
+from importlib.resources import files
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
-from scgen.assets import ASSET_DIR
 from scgen.errors import ScgenError
 from scgen.scenes.materials import MATERIALS
+
+# the bundled spacecraft ships inside the package (package data: scgen/assets), so an installed wheel finds
+# it anywhere
+BUNDLED_MODEL_DIR = Path(str(files("scgen") / "assets" / "spacecraft"))
 
 _MATERIAL_KEYWORDS = (
     ("gold", "mli_gold"),
@@ -129,7 +133,7 @@ def load_mesh_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
 def load_target(path: str | Path | None = None, keep_scale: bool = False) -> TargetModel:
     """The bundled spacecraft (path None) or any user mesh, normalised to the object frame."""
     if path is None:
-        path = ASSET_DIR / PARTS_FILE
+        path = BUNDLED_MODEL_DIR / PARTS_FILE
         if not path.exists():
             raise ScgenError(
                 f"bundled model missing at {path}: reinstall scgen, or in a checkout run `make assets`"

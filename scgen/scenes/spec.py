@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from scgen.io import bop
 from scgen.scenes.attitude import ConeDraw
 from scgen.scenes.geometry import focal_length, project
 from scgen.scenes.lens import distort, is_pinhole, undistort
@@ -71,6 +72,14 @@ class CameraSpec:
         dist = tuple(float(k) for k in c.get("dist") or ())
         return CameraSpec(c["width"], c["height"], tuple(float(k) for k in K), float(c["exposure_ev"]),
                           () if is_pinhole(dist) else dist)  # fmt: skip
+
+    @staticmethod
+    def from_scene_camera(entry: dict[str, Any], width: int, height: int) -> CameraSpec:
+        """The camera of a scene_camera.json entry: cam_K and, where present, the lens' cam_dist."""
+        dist = bop.camera_dist(entry)
+        K = tuple(float(k) for k in entry["cam_K"])
+        exposure_ev = float(entry.get("exposure_ev", 0.0))
+        return CameraSpec(width, height, K, exposure_ev, () if is_pinhole(dist) else dist)
 
     @property
     def focal(self) -> float:

@@ -18,13 +18,13 @@ import numpy as np
 from pycocotools import mask as mask_utils
 
 import scgen
-from scgen.dataset import bop
 from scgen.dataset.export.output import ExportFormat
 from scgen.dataset.export.source import Sample, Source
-from scgen.dataset.image_file import why_unreadable
 from scgen.dataset.layout import OBJ_ID, dumps
 from scgen.dataset.splits import SPLITS
 from scgen.errors import ScgenError
+from scgen.io import bop
+from scgen.io.image_file import why_unreadable
 
 IMAGE_FIELDS = ("id", "file_name", "width", "height")  # COCO's own keys of an image entry
 

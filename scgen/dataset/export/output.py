@@ -10,8 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from scgen.dataset.atomic import TMP_MARK
 from scgen.errors import ScgenError
+from scgen.io.atomic import TMP_MARK
 
 if TYPE_CHECKING:
     from scgen.dataset.export.source import Source

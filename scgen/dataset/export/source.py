@@ -13,11 +13,11 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from scgen.dataset import bop
 from scgen.dataset.bop_dataset import BopImage, open_bop_dataset
-from scgen.dataset.image_file import read_image, why_unreadable
 from scgen.dataset.layout import OBJ_ID, TARGET_INSTANCE, Layout, open_dataset, read_metadata
 from scgen.errors import ScgenError
+from scgen.io import bop
+from scgen.io.image_file import read_image, why_unreadable
 
 
 @dataclass(frozen=True)

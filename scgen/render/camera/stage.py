@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scgen.render.buffers import TARGET_ID, CameraRecord
+from scgen.io.buffers import TARGET_ID, CameraRecord
 from scgen.render.camera import glare, optics
 from scgen.render.camera.exposure import exposure_shift_ev, luminance
 from scgen.render.camera.lens import to_camera

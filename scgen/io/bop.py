@@ -15,12 +15,11 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from scgen.dataset.image_file import read_image
 from scgen.errors import ScgenError
-from scgen.scenes.lens import DIST_KEYS, is_pinhole
-from scgen.scenes.spec import CameraSpec
+from scgen.io.image_file import read_image
 
 MM_PER_M = 1000.0
+DIST_KEYS = ("k1", "k2", "p1", "p2", "k3")  # scene_camera.json's cam_dist: OpenCV's lens order (scenes.lens)
 CAMERA_FILE = "camera.json"
 MODELS_DIR = "models"
 MODELS_INFO_FILE = "models_info.json"
@@ -198,14 +197,6 @@ def camera_dist(entry: dict[str, Any]) -> tuple[float, ...]:
     return dist
 
 
-def camera_spec(entry: dict[str, Any], width: int, height: int) -> CameraSpec:
-    """The camera of a scene_camera.json entry: cam_K and, where present, the lens' cam_dist."""
-    dist = camera_dist(entry)
-    K = tuple(float(k) for k in entry["cam_K"])
-    exposure_ev = float(entry.get("exposure_ev", 0.0))
-    return CameraSpec(width, height, K, exposure_ev, () if is_pinhole(dist) else dist)
-
-
 def models_info_entry(bounds_m: np.ndarray, diameter_m: float) -> dict[str, float]:
     """A models_info.json entry (millimetres) from the model's bounds (2 x 3, metres) and diameter."""
     lo, hi = np.asarray(bounds_m) * MM_PER_M
@@ -224,6 +215,14 @@ def model_box_m(info: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """(min corner, size) of a models_info entry's bounding box, in metres."""
     lo = np.array([info["min_x"], info["min_y"], info["min_z"]], dtype=np.float64) / MM_PER_M
     return lo, model_size_m(info)
+
+
+NOT_A_FOLDER = "does not exist or is not a directory"
+
+
+def not_a_dataset(root: str | Path, why: str) -> str:
+    """The one wording of both CLIs (scgen, posenet) for a dataset argument that is not one."""
+    return f"not a dataset folder: {root} {why}"
 
 
 def read_json(path: Path) -> Any:
