@@ -24,8 +24,8 @@ from scgen.annotate import annotate
 from scgen.dataset.layout import Layout
 from scgen.dataset.writer import WriteOptions, write_sample
 from scgen.generator import Generator
-from scgen.render.blender import BlenderBackend
-from scgen.render.blender_settings import PRESETS, QualityPreset, configure_beauty
+from scgen.render.blender.backend import BlenderBackend
+from scgen.render.blender.settings import PRESETS, QualityPreset, configure_beauty
 from scgen.run.runner import write_static_files
 from scgen.scenes import load_config
 from scgen.scenes.model import TargetModel, load_target

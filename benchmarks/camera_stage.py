@@ -18,7 +18,8 @@ from typing import Any
 import click
 
 from scgen.generator import Generator
-from scgen.render import blender, mitsuba_backend
+from scgen.render.blender import backend as blender
+from scgen.render.mitsuba import backend as mitsuba_backend
 
 CASES = (("default", (640, 480)), ("speedplus", (1920, 1200)))
 

@@ -29,7 +29,7 @@ from scgen.annotate import annotate
 from scgen.generator import Generator
 from scgen.render.camera.glare import FLARE_REACH_RAD, sun_view
 from scgen.render.lighting import mean_luminance
-from scgen.render.mitsuba_backend import MitsubaBackend
+from scgen.render.mitsuba.backend import MitsubaBackend
 from scgen.scenes.factors import FACTOR_GROUPS, distance_groups
 from scgen.scenes.finish import finish_group
 

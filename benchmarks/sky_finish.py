@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from scgen.generator import Generator
-from scgen.render.backgrounds import background_image
+from scgen.render.sky.backgrounds import background_image
 
 CONFIGS = {
     "before (procedural sky, nominal finish)": {

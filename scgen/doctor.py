@@ -56,7 +56,7 @@ def diagnose(out: Path | None = None) -> Iterator[Finding]:
 
 
 def python() -> Finding:
-    from scgen.render.blender_env import BPY_PYTHON
+    from scgen.render.blender.env import BPY_PYTHON
 
     version = ".".join(map(str, sys.version_info[:3]))
     if sys.version_info[:2] == BPY_PYTHON:
@@ -115,7 +115,7 @@ def mitsuba() -> Finding:
     if importlib.util.find_spec("mitsuba") is None:
         detail = "not installed: no backend can render (labels are Mitsuba ray casts), annotate cannot run"
         return Finding(WARN, "mitsuba", detail, install("mitsuba"))
-    from scgen.render.mitsuba_llvm import LLVM_VARIANT, check_mitsuba
+    from scgen.render.mitsuba.llvm import LLVM_VARIANT, check_mitsuba
 
     setup = check_mitsuba()
     if not setup.libllvm.tested:

@@ -13,12 +13,12 @@ import trimesh
 from scgen.errors import ScgenError
 from scgen.generator import Generator
 from scgen.io.buffers import TARGET_ID
-from scgen.render.backgrounds import srgb_to_linear
 from scgen.render.base import create_backend
-from scgen.render.blender import BlenderBackend
-from scgen.render.blender_env import import_bpy, select_device
+from scgen.render.blender.backend import BlenderBackend
+from scgen.render.blender.env import import_bpy, select_device
 from scgen.render.lighting import exposure_scale, sun_render_irradiance
-from scgen.render.mitsuba_backend import MitsubaBackend, select_variant
+from scgen.render.mitsuba.backend import MitsubaBackend, select_variant
+from scgen.render.sky.backgrounds import srgb_to_linear
 from scgen.scenes import load_config
 from scgen.scenes.model import load_target, normalise_parts
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, SceneSpec, SunSpec
@@ -57,7 +57,7 @@ def test_bpy_imports_in_a_process_spawned_by_one_that_imported_it():
     import_bpy()
     script = (
         f"import sys; sys.path[:] = {sys.path!r}\n"
-        "from scgen.render.blender_env import import_bpy\n"
+        "from scgen.render.blender.env import import_bpy\n"
         "print(import_bpy().app.version_string)"
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from scgen.errors import ScgenError
-from scgen.render.blender_frames import camera_matrix_world, intrinsics_from_K, light_matrix_world
+from scgen.render.blender.frames import camera_matrix_world, intrinsics_from_K, light_matrix_world
 from scgen.scenes.geometry import random_rotation
 
 

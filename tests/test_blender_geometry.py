@@ -15,8 +15,8 @@ import trimesh
 from scgen.annotate.annotate import annotate
 from scgen.generator import Generator
 from scgen.io.buffers import TARGET_ID
-from scgen.render.blender import BlenderBackend
-from scgen.render.mitsuba_backend import MitsubaBackend
+from scgen.render.blender.backend import BlenderBackend
+from scgen.render.mitsuba.backend import MitsubaBackend
 from scgen.scenes import load_config
 from scgen.scenes.model import load_target
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from scgen.generator import Generator
-from scgen.render.blender import props_may_hide_target
+from scgen.render.blender.backend import props_may_hide_target
 from scgen.scenes import load_config
 from scgen.scenes.model import load_target
 

@@ -11,8 +11,8 @@ import pytest
 from scgen.dataset.stats import compute_stats
 from scgen.generator import Generator
 from scgen.io.buffers import BACKGROUND_ID
-from scgen.render.backgrounds import srgb_to_linear
-from scgen.render.mitsuba_materials import CRINKLE_SLOPE, crinkle_normal_map, crinkle_normal_tensor
+from scgen.render.mitsuba.materials import CRINKLE_SLOPE, crinkle_normal_map, crinkle_normal_tensor
+from scgen.render.sky.backgrounds import srgb_to_linear
 from scgen.run.runner import RenderJob, run_render
 from scgen.scenes import load_config
 from scgen.scenes.finish import finish_group, finished, sample_finish
@@ -82,7 +82,7 @@ def test_varied_finish_changes_the_target_and_nothing_else():
 
 def test_a_reused_mitsuba_bsdf_renders_what_a_new_one_would():
     """Mitsuba's target BSDFs are kept from sample to sample and set to each sample's finish in place
-    (mitsuba_materials.TargetFinishes): sample 2 rendered after samples 0 and 1 equals sample 2 rendered
+    (mitsuba.materials.TargetFinishes): sample 2 rendered after samples 0 and 1 equals sample 2 rendered
     by a fresh backend, whose BSDFs are built for it; the crinkle maps set in place come from one Dr.Jit
     kernel, bit for bit numpy's."""
     with generator({"swap_prob": 0.5}) as g:

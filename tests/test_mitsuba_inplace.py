@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from scgen.generator import Generator
-from scgen.render.mitsuba_backend import MitsubaBackend, select_variant
-from scgen.render.mitsuba_lights import directional_frame, irradiance_rgb
-from scgen.render.ray_cull import may_hit
+from scgen.render.mitsuba.backend import MitsubaBackend, select_variant
+from scgen.render.mitsuba.lights import directional_frame, irradiance_rgb
+from scgen.render.mitsuba.ray_cull import may_hit
 
 TINY = (96, 72)
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from scgen.render.mitsuba_llvm import (
+from scgen.render.mitsuba.llvm import (
     LIBLLVM_ENV,
     LIBLLVM_GLOBS,
     VERDICT_ENV,

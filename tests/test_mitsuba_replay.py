@@ -8,7 +8,7 @@ import numpy as np
 from trimesh.transformations import rotation_matrix
 
 from scgen.generator import Generator
-from scgen.render.mitsuba_backend import MitsubaBackend
+from scgen.render.mitsuba.backend import MitsubaBackend
 from scgen.scenes.spec import Pose
 
 TINY = (96, 72)

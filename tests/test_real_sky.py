@@ -9,10 +9,10 @@ from scipy.spatial import cKDTree
 
 from scgen.generator import Generator
 from scgen.io.buffers import BACKGROUND_ID
-from scgen.render.backgrounds import background_image
-from scgen.render.earth_surface import CLOUD_THRESHOLD, cloud_cover, disc_albedo
 from scgen.render.lighting import SOLAR_CONSTANT, body_albedo_light, exposure_scale
-from scgen.render.stars import SUN_V, pixel_solid_angle, project_stars, star_image, tint
+from scgen.render.sky.backgrounds import background_image
+from scgen.render.sky.earth_surface import CLOUD_THRESHOLD, cloud_cover, disc_albedo
+from scgen.render.sky.stars import SUN_V, pixel_solid_angle, project_stars, star_image, tint
 from scgen.scenes import load_config
 from scgen.scenes.geometry import orthonormal_basis, unit_sphere_hits
 from scgen.scenes.model import load_target

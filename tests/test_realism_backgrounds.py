@@ -8,9 +8,9 @@ import pytest
 
 from scgen.errors import ScgenError
 from scgen.generator import Generator
-from scgen.render.backgrounds import background_image, srgb_to_linear
 from scgen.render.conventions import LUMA
 from scgen.render.lighting import exposure_scale
+from scgen.render.sky.backgrounds import background_image, srgb_to_linear
 from scgen.scenes import load_config
 from scgen.scenes.geometry import unit_sphere_hits
 from scgen.scenes.model import load_target

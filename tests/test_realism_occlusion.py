@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from scgen.annotate import annotate
-from scgen.render.mitsuba_backend import MitsubaBackend
+from scgen.render.mitsuba.backend import MitsubaBackend
 from scgen.scenes import load_config, sample_scene
 from scgen.scenes.model import load_target
 from scgen.scenes.props import bounding_radius, local_pieces

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from scgen.annotate import annotate
-from scgen.render.mitsuba_backend import MitsubaBackend
+from scgen.render.mitsuba.backend import MitsubaBackend
 from scgen.scenes import load_config, sample_scene
 from scgen.scenes.model import load_target
 from scgen.scenes.silhouette import TargetShape

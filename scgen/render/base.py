@@ -42,11 +42,11 @@ def check_backend(name: str, device: str = "auto") -> None:
     if importlib.util.find_spec("mitsuba") is None:
         raise ScgenError(MITSUBA_MISSING[name])
     if name == "mitsuba":
-        from scgen.render.mitsuba_llvm import mitsuba_setup
+        from scgen.render.mitsuba.llvm import mitsuba_setup
 
         mitsuba_setup()
     else:
-        from scgen.render.blender_env import check_bpy, check_device, import_bpy, select_device
+        from scgen.render.blender.env import check_bpy, check_device, import_bpy, select_device
 
         check_bpy()
         check_device(device)
@@ -64,10 +64,10 @@ def create_backend(
     check_backend(name)  # the device is the backend's to choose (Blender probes the GPUs once)
     threads = renderer_threads(name, 1, threads)
     if name == "mitsuba":
-        from scgen.render.mitsuba_backend import MitsubaBackend
+        from scgen.render.mitsuba.backend import MitsubaBackend
 
         return MitsubaBackend(model, quality=quality, threads=threads)
-    from scgen.render.blender import BlenderBackend
+    from scgen.render.blender.backend import BlenderBackend
 
     return BlenderBackend(model, quality=quality, device=device, threads=threads)
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from scgen.render.conventions import LUMA
-from scgen.render.earth_surface import disc_albedo
+from scgen.render.sky.earth_surface import disc_albedo
 from scgen.scenes.sky import BODY_OF_KIND
 from scgen.scenes.spec import SceneSpec
 

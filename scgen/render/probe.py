@@ -2,7 +2,7 @@
 
 A renderer can fail where no `except` reaches: LLVM aborts the whole process on a kernel it cannot
 compile (libLLVM 15: `Cannot select: fmaximum`), a GPU driver can crash bpy. So the libLLVM check
-(scgen.render.mitsuba_llvm) and `scgen doctor` ask a child process (scgen.render.probe_child).
+(scgen.render.mitsuba.llvm) and `scgen doctor` ask a child process (scgen.render.probe_child).
 The child reports what it found (the libLLVM it loaded, Cycles' GPUs) before it renders, so a crash still
 leaves the report; exit status 0 means the sample rendered.
 """

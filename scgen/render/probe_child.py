@@ -29,19 +29,19 @@ def _mitsuba(model: TargetModel) -> Any:
     import drjit as dr  # loads libLLVM
     import mitsuba as mi
 
-    from scgen.render.mitsuba_llvm import LLVM_VARIANT
+    from scgen.render.mitsuba.llvm import LLVM_VARIANT
 
     version = dr.detail.llvm_version()
     _report(libllvm=_loaded_libllvm(), version=".".join(map(str, version)) if version[0] > 0 else None)
     mi.set_variant(LLVM_VARIANT)  # the variant under test; the backend keeps a variant already set
-    from scgen.render.mitsuba_backend import MitsubaBackend
+    from scgen.render.mitsuba.backend import MitsubaBackend
 
     return MitsubaBackend(model, quality="draft")
 
 
 def _blender(model: TargetModel) -> Any:
-    from scgen.render.blender import BlenderBackend
-    from scgen.render.blender_env import gpu_devices, import_bpy
+    from scgen.render.blender.backend import BlenderBackend
+    from scgen.render.blender.env import gpu_devices, import_bpy
 
     gpus = {api: [d.name for d in devices if d.type == api] for api, devices in gpu_devices(import_bpy())}
     _report(gpus=gpus)

@@ -38,7 +38,7 @@ from scgen.io.atomic import atomic_write_bytes, atomic_write_text, remove_stale_
 from scgen.io.bop import read_json
 from scgen.io.exr import encode_xyz_exr
 from scgen.io.parent_watch import spawn_pool
-from scgen.render import raycast
+from scgen.render.mitsuba import raycast
 
 RECORDS_DIR = "annotate"
 Models = dict[int, tuple[np.ndarray, np.ndarray]]

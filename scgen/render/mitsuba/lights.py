@@ -1,7 +1,7 @@
 """The Mitsuba backend's directional lights: the sun and the Earth's reflected light of a sample, written
 into the lights of a scene kept for the run, and the steady bounding sphere they are given.
 
-A light's direction and irradiance are written in place (mitsuba_memory) into memory each light owns
+A light's direction and irradiance are written in place (memory) into memory each light owns
 from its scene's start: setting them through mi.traverse launched about 80 kernels a sample (every entry
 of a new transform made opaque), and a frozen render reads them from that memory either way.
 """
@@ -9,12 +9,12 @@ of a new transform made opaque), and a frozen render reads them from that memory
 from __future__ import annotations
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 
+import mitsuba as mi
 from scgen.render.conventions import CLIP_START_M, EARTHSHINE_COLOUR
 from scgen.render.lighting import body_albedo_light, sun_render_irradiance
-from scgen.render.mitsuba_memory import channels, check_held, overwrite, own_scalars
+from scgen.render.mitsuba.memory import channels, check_held, overwrite, own_scalars
 from scgen.scenes.spec import SceneSpec
 
 ROTATION = [(r, c) for r in range(3) for c in range(3)]  # the entries of a light's frame that vary
@@ -82,7 +82,7 @@ class SceneLights:
                        [a for name in names for a in _varying(live, name)], "lights")  # fmt: skip
 
     def _own(self, name: str) -> None:
-        """Give light `name`'s varying values memory of their own (see mitsuba_memory.own_scalars)."""
+        """Give light `name`'s varying values memory of their own (see memory.own_scalars)."""
         frame, colour = self._params[f"{name}.to_world"], self._params[f"{name}.irradiance.value"]
         parts = []
         for part in (frame.matrix, frame.inverse_transpose):

@@ -6,7 +6,7 @@ filtered or jittered sample ever blends two surfaces at an edge.
 
 A worker keeps one scene (per camera, with or without the Earth's light) for its whole run and refills it
 every sample: the target's triangles go into one mesh per finish BSDF, the props' into one mesh per
-material class (mitsuba_slots), and the lights take the sample's direction and irradiance. Then the render
+material class (slots), and the lights take the sample's direction and irradiance. Then the render
 replays a frozen recording (drjit.freeze) instead of tracing the path tracer through every live BSDF
 again (about 20 ms a sample at any image size); it records again only when the set of meshes, BSDFs or
 lights grows, a mesh outgrows its capacity, or the lights' bounding sphere changes.
@@ -19,21 +19,21 @@ from dataclasses import replace
 from typing import Any
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 from trimesh.transformations import transform_points
 
+import mitsuba as mi
 from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers
-from scgen.render.backgrounds import background_image
 from scgen.render.camera import record_image, render_camera
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, MITSUBA_THREADS, check_quality, render_seed
-from scgen.render.mitsuba_lights import SceneLights, light_radius, sample_lights
-from scgen.render.mitsuba_llvm import mitsuba_setup
-from scgen.render.mitsuba_materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
-from scgen.render.mitsuba_memory import aligned
-from scgen.render.mitsuba_slots import MeshSlot, build_mesh, registry_id
+from scgen.render.mitsuba.lights import SceneLights, light_radius, sample_lights
+from scgen.render.mitsuba.llvm import mitsuba_setup
+from scgen.render.mitsuba.materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
+from scgen.render.mitsuba.memory import aligned
+from scgen.render.mitsuba.ray_cull import may_hit
+from scgen.render.mitsuba.slots import MeshSlot, build_mesh, registry_id
 from scgen.render.props import prop_mesh
-from scgen.render.ray_cull import may_hit
+from scgen.render.sky.backgrounds import background_image
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
@@ -45,7 +45,7 @@ RECORDINGS_KEPT = 32  # frozen renders a backend keeps, the least recently used 
 
 
 def select_variant() -> str:
-    """Set the variant mitsuba_llvm chose for this process (llvm_ad_rgb when its libLLVM renders, else
+    """Set the variant llvm chose for this process (llvm_ad_rgb when its libLLVM renders, else
     scalar_rgb), unless one is set already; returns the variant in use."""
     if mi.variant() is None:
         mi.set_variant(mitsuba_setup().variant)
@@ -241,7 +241,7 @@ class MitsubaBackend:
 
     def _rebuild(self, scene: mi.Scene) -> None:
         """Rebuild a kept scene's BVH for its slots' new triangles. The slots are written without telling
-        them (mitsuba_slots), so the guard is touched: a scene rebuilds when any of its shapes changed, and
+        them (slots), so the guard is touched: a scene rebuilds when any of its shapes changed, and
         another scene's rebuild marks the guard up to date again."""
         self._guard.parameters_changed(["vertex_positions"])
         scene.parameters_changed([])

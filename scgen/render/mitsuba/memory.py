@@ -13,8 +13,9 @@ from collections.abc import Iterable
 from typing import Any
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
+
+import mitsuba as mi
 
 ALIGNMENT = 64  # bytes: the widest vector loads of Dr.Jit's LLVM backend (AVX-512)
 

@@ -13,10 +13,10 @@ import functools
 from typing import Any
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 
-from scgen.render.mitsuba_memory import aligned, channels, check_held, overwrite, own_scalars
+import mitsuba as mi
+from scgen.render.mitsuba.memory import aligned, channels, check_held, overwrite, own_scalars
 from scgen.scenes.finish import finished
 from scgen.scenes.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
 
@@ -175,7 +175,7 @@ def _pool_name(drawn: str, k: int) -> str:
 
 class FinishParameters:
     """What a sample sets of a BSDF built by finish_bsdf: its numbers (colour, roughness, metallic) are
-    written in place into memory of their own (mitsuba_memory; through mi.traverse, one kernel launch
+    written in place into memory of their own (memory; through mi.traverse, one kernel launch
     each), its textures (the crinkle's normal map, the cells' colours) set through mi.traverse."""
 
     def __init__(self, bsdf: mi.BSDF, m: Material) -> None:

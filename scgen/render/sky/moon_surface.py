@@ -13,7 +13,7 @@ import functools
 
 import numpy as np
 
-from scgen.render.textures import equirect, periodic_noise
+from scgen.render.sky.textures import equirect, periodic_noise
 
 MOON_MAP = (1024, 2048)  # equirectangular size of the height and albedo maps (0.18 deg a texel)
 MOON_SEED = 0x4D4F4F4E  # the one Moon

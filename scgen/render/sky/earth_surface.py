@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from scgen.render import bluemarble
 from scgen.render.conventions import LUMA
-from scgen.render.textures import equirect, periodic_noise
+from scgen.render.sky import bluemarble
+from scgen.render.sky.textures import equirect, periodic_noise
 from scgen.scenes.sky import body_centre, earth_frame
 
 EARTH_OCEAN = np.array([0.010, 0.030, 0.085])

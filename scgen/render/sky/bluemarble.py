@@ -18,7 +18,7 @@ import functools
 import cv2
 import numpy as np
 
-from scgen.render.textures import periodic_noise
+from scgen.render.sky.textures import periodic_noise
 from scgen.scenes.sky_data import blue_marble
 
 LEVELS = 6

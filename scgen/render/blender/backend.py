@@ -1,6 +1,6 @@
 """Blender (bpy + Cycles) backend, the default renderer: exact pixel-centre labels, fast, flat memory.
 
-Per sample: update the persistent scenes in place (blender_scene), render the anti-aliased beauty
+Per sample: update the persistent scenes in place (scene), render the anti-aliased beauty
 image (RGB + depth + object index from the centred first sample), then a one-sample aux render
 (normals, sun visibility, target-alone depth), and turn the passes into Buffers (pure numpy).
 bpy is imported only when a backend is made, so scgen works without it for other backends.
@@ -18,17 +18,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers
-from scgen.render.backgrounds import background_image
-from scgen.render.blender_env import import_bpy, select_device
-from scgen.render.blender_scene import ALONE, BEAUTY, PROBE, BlenderScene
-from scgen.render.blender_settings import preset
+from scgen.render.blender.env import import_bpy, select_device
+from scgen.render.blender.scene import ALONE, BEAUTY, PROBE, BlenderScene
+from scgen.render.blender.settings import preset
 from scgen.render.camera import record_image, render_camera
+from scgen.render.sky.backgrounds import background_image
 from scgen.scenes.geometry import project
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
 
 if TYPE_CHECKING:
-    from scgen.render.mitsuba_backend import MitsubaBackend
+    from scgen.render.mitsuba.backend import MitsubaBackend
 
 GRAZING = 1e-4  # |n.s| below this: the surface is edge-on to the sun, its visibility is not measured
 
@@ -76,7 +76,7 @@ class BlenderBackend:
     def _ray_caster(self) -> MitsubaBackend:
         """The Mitsuba backend's exact geometric passes, made on first need (cameras with a lens)."""
         if self._rays is None:
-            from scgen.render.mitsuba_backend import MitsubaBackend
+            from scgen.render.mitsuba.backend import MitsubaBackend
 
             self._rays = MitsubaBackend(self._model)  # Dr.Jit's threads are per process: Mitsuba's default
         return self._rays
@@ -128,7 +128,7 @@ def composite(beauty: dict[str, np.ndarray], background: np.ndarray) -> np.ndarr
 def buffers_from_passes(
     spec: SceneSpec, beauty: dict[str, np.ndarray], aux: dict[str, np.ndarray]
 ) -> Buffers:
-    """The label passes from the EXR channels of the beauty and aux renders (see blender_scene for the
+    """The label passes from the EXR channels of the beauty and aux renders (see scene for the
     layers); the image is the camera stage's."""
     instance, depth = instance_and_depth(beauty)
     hit = instance != BACKGROUND_ID

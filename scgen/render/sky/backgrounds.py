@@ -9,7 +9,7 @@ the backgrounds are the same image whatever the renderer. Kinds:
 - user: an image of the user's own (the sampler picks the file), cover-cropped, sRGB decoded.
 The sun's glare is the camera stage's (scgen.render.camera.glare), over the whole image.
 Sunlit things (the Earth) follow the camera model of scgen.render.lighting: they scale with the
-sun irradiance and the exposure; so does the Moon (scgen.render.moon_surface). The procedural stars only
+sun irradiance and the exposure; so does the Moon (scgen.render.sky.moon_surface). The procedural stars only
 scale with exposure and are exaggerated for visibility (real stars, the Hipparcos default, are about 1e-8
 of a sunlit plate): nothing else in the sky glows.
 """
@@ -20,11 +20,11 @@ import cv2
 import numpy as np
 
 from scgen.errors import ScgenError
-from scgen.render.bluemarble import level_of_detail
-from scgen.render.earth_surface import bluemarble_surface, procedural_surface
 from scgen.render.lighting import exposure_scale
-from scgen.render.moon_surface import moon_surface
-from scgen.render.stars import star_image
+from scgen.render.sky.bluemarble import level_of_detail
+from scgen.render.sky.earth_surface import bluemarble_surface, procedural_surface
+from scgen.render.sky.moon_surface import moon_surface
+from scgen.render.sky.stars import star_image
 from scgen.scenes.geometry import random_rotation, unit_sphere_hits
 from scgen.scenes.sky import body_centre, earth_frame, sky_frame
 from scgen.scenes.spec import SceneSpec
@@ -94,7 +94,7 @@ def _moon(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np
 def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np.ndarray) -> np.ndarray:
     """A lit Earth: the unit sphere at direction c seen with angular radius rho, over the star field.
 
-    Lambertian surface (scgen.render.earth_surface: Blue Marble or procedural, with clouds; oceans
+    Lambertian surface (scgen.render.sky.earth_surface: Blue Marble or procedural, with clouds; oceans
     with a sun glint) under the sun, a scattering haze thickening towards the limb, and a thin glow
     above it; night side black.
     """

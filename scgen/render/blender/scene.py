@@ -25,10 +25,10 @@ import numpy as np
 import OpenEXR
 
 from scgen.io.buffers import TARGET_ID
-from scgen.render.blender_env import quiet_stdout
-from scgen.render.blender_frames import camera_matrix_world, intrinsics_from_K, light_matrix_world
-from scgen.render.blender_materials import build_materials, new_material, probe_material, set_finish
-from scgen.render.blender_settings import (
+from scgen.render.blender.env import quiet_stdout
+from scgen.render.blender.frames import camera_matrix_world, intrinsics_from_K, light_matrix_world
+from scgen.render.blender.materials import build_materials, new_material, probe_material, set_finish
+from scgen.render.blender.settings import (
     SUN_ANGLE_RAD,
     QualityPreset,
     configure_aux,

@@ -6,7 +6,7 @@ tracing the path tracer costs (about 20 ms). So a slot is one mesh with one BSDF
 this sample's (unwelded: three corners each, in face order, as box_uv lays out their UVs), and the rest
 of its capacity NaN: Embree leaves triangles with non-finite corners out of its BVH, so the padding is
 never hit and costs little (a BVH rebuild took 0.7 ms longer with twelve empty 4716-triangle slots).
-A refill writes the mesh's buffers in place (mitsuba_memory) and tells the mesh nothing: its bounding box
+A refill writes the mesh's buffers in place (memory) and tells the mesh nothing: its bounding box
 (thirteen kernel launches to compute, and read by nothing here) goes stale, and the scenes holding it are
 told to rebuild their BVH by the backend (MitsubaBackend._rebuild).
 """
@@ -16,10 +16,10 @@ from __future__ import annotations
 from typing import Any
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 
-from scgen.render.mitsuba_memory import aligned, aligned_empty, overwrite
+import mitsuba as mi
+from scgen.render.mitsuba.memory import aligned, aligned_empty, overwrite
 
 
 def build_mesh(name: str, corners: np.ndarray, uv: np.ndarray, bsdf: mi.BSDF) -> mi.Mesh:

@@ -8,10 +8,10 @@ Mitsuba ray cast as the Mitsuba backend's geometric passes.
 from __future__ import annotations
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 
-from scgen.render.mitsuba_backend import cast_rays, select_variant
+import mitsuba as mi
+from scgen.render.mitsuba.backend import cast_rays, select_variant
 from scgen.scenes.spec import CameraSpec
 
 Box = tuple[int, int, int, int]  # x, y, w, h in pixels; may reach past the image (an enlarged canvas)
