@@ -8,9 +8,11 @@ is resolved), fitted as EMVA 1288 does (scgen.render.camera.characterise.photon_
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from scgen.render.camera.characterise import photon_transfer
 from scgen.render.camera.sensor import conversion_gain
-from scgen.scenes.camera_config import camera_preset
+from scgen.scenes.camera_config import preset_settings
 
 CASES = (("default", 1.0), ("default", 4.0), ("default", 16.0), ("speedplus", 1.0), ("speedplus", 8.0))
 
@@ -19,9 +21,9 @@ def main() -> None:
     header = ("preset", "gain", "K set", "K fit", "err", "read set", "read fit", "err")
     print("{:10} {:>5} {:>8} {:>8} {:>6} {:>9} {:>9} {:>6}".format(*header))
     for preset, gain in CASES:
-        sensor = dict(camera_preset(preset)["sensor"], adc_bits=16, dark_current_e_s=0.0, hot_pixel_frac=0.0,
-                      dead_pixel_frac=0.0)  # fmt: skip
-        k_set, read_set = conversion_gain(sensor, gain), sensor["read_noise_e"]
+        flat_field = {"adc_bits": 16, "dark_current_e_s": 0.0, "hot_pixel_frac": 0.0, "dead_pixel_frac": 0.0}
+        sensor = replace(preset_settings(preset).sensor, **flat_field)
+        k_set, read_set = conversion_gain(sensor, gain), sensor.read_noise_e
         k_fit, read_fit = photon_transfer(sensor, gain)
         print(f"{preset:10} {gain:5.1f} {k_set:8.3f} {k_fit:8.3f} {100 * (k_fit / k_set - 1):5.1f}% "
               f"{read_set:9.2f} {read_fit:9.2f} {100 * (read_fit / read_set - 1):5.1f}%")  # fmt: skip

@@ -18,6 +18,7 @@ import numpy as np
 
 from scgen.generator import Generator
 from scgen.scenes import load_config
+from scgen.scenes.camera_config import CameraSettings
 from scgen.scenes.imaging import sample_imaging
 from scgen.scenes.rng import factor_rng
 from scgen.scenes.spec import CameraSpec, SunSpec
@@ -32,7 +33,7 @@ def _as_camera(spec, preset: str, width: int):
     cfg = load_config(camera=preset, resolution=(width, height))
     rng = factor_rng(spec.seed, spec.index, "camera")
     camera = CameraSpec.from_config(cfg["camera"])
-    return replace(spec, camera=camera, imaging=sample_imaging(rng, cfg["camera"]))
+    return replace(spec, camera=camera, imaging=sample_imaging(rng, CameraSettings.from_table(cfg["camera"])))
 
 
 def _sun_in_view(spec):

@@ -19,7 +19,7 @@ from scgen.render.camera.exposure import exposure_shift_ev, luminance
 from scgen.render.camera.lens import render_camera, to_camera
 from scgen.render.camera.sensor import bloom_columns, conversion_gain, expose, shot_noise
 from scgen.scenes import load_config
-from scgen.scenes.camera_config import camera_preset
+from scgen.scenes.camera_config import camera_preset, preset_settings
 from scgen.scenes.lens import distort, undistort
 from scgen.scenes.spec import CameraSpec, SunSpec
 
@@ -30,11 +30,11 @@ SPEEDPLUS = camera_preset("speedplus")
 def test_photon_transfer_recovers_conversion_gain_and_read_noise(preset: str, gain: float):
     """Variance against mean over flat fields recovers the configured ADC codes per electron and read
     noise (a 16-bit ADC, so the read noise is resolved; no dark current, hot or dead pixels)."""
-    sensor = dict(camera_preset(preset)["sensor"], adc_bits=16, dark_current_e_s=0.0, hot_pixel_frac=0.0,
-                  dead_pixel_frac=0.0)  # fmt: skip
+    sensor = replace(preset_settings(preset).sensor, adc_bits=16, dark_current_e_s=0.0, hot_pixel_frac=0.0,
+                     dead_pixel_frac=0.0)  # fmt: skip
     k, read_noise = photon_transfer(sensor, gain)
     assert k == pytest.approx(conversion_gain(sensor, gain), rel=0.10)
-    assert read_noise == pytest.approx(sensor["read_noise_e"], rel=0.10)
+    assert read_noise == pytest.approx(sensor.read_noise_e, rel=0.10)
 
 
 @pytest.mark.parametrize("lam", [0.3, 3.0, 25.0])
@@ -91,21 +91,21 @@ def test_blooming_spills_along_columns_and_conserves_charge():
 
 
 def test_auto_exposure_brings_the_visible_target_to_its_target_value():
-    exposure = dict(camera_preset("default")["exposure"], mode="auto")
+    exposure = replace(preset_settings("default").exposure, mode="auto")
     img = np.full((20, 20, 3), 0.01, np.float32)
     img[5:15, 5:15] = [0.6, 0.7, 0.8]
     visible = np.zeros((20, 20), bool)
     visible[5:15, 5:15] = True
     ev = exposure_shift_ev(exposure, 0.0, img, visible)
     shown = img * 2.0 ** (-ev)
-    assert luminance(shown)[visible].mean() == pytest.approx(exposure["auto_target"], rel=1e-5)
+    assert luminance(shown)[visible].mean() == pytest.approx(exposure.auto_target, rel=1e-5)
 
 
 @pytest.mark.parametrize("mode", ["range", "auto"])
 def test_highlight_protection_shortens_the_exposure_just_enough_that_at_most_the_limit_clips(mode: str):
     """A frame whose bright tenth (an Earth under a strong sun) would clip: the exposure is shortened until
     at most `max_clipped` of its pixels clip, and no further (a hundredth of an EV less clips more)."""
-    exposure = dict(camera_preset("default")["exposure"], mode=mode)
+    exposure = replace(preset_settings("default").exposure, mode=mode)
     rng = np.random.default_rng(3)
     img = rng.uniform(0.05, 0.4, (120, 160, 3)).astype(np.float32)
     img[:12] = rng.uniform(1.5, 4.0, (12, 160, 3))  # 10 % of the frame, up to 2 EV over
@@ -116,12 +116,12 @@ def test_highlight_protection_shortens_the_exposure_just_enough_that_at_most_the
         return float(((img * 2.0 ** (-ev)).max(axis=-1) >= 1.0).mean())
 
     ev = exposure_shift_ev(exposure, 0.0, img, visible)
-    assert clipped(ev) <= exposure["max_clipped"] < clipped(ev - 0.01)
+    assert clipped(ev) <= exposure.max_clipped < clipped(ev - 0.01)
     dim = np.full_like(img, 0.05)  # nothing clips at the metered or drawn exposure: it stands
     assert exposure_shift_ev(exposure, 0.3, dim, visible) == exposure_shift_ev(
-        dict(exposure, max_clipped=1.0), 0.3, dim, visible
+        replace(exposure, max_clipped=1.0), 0.3, dim, visible
     )
-    assert exposure_shift_ev(dict(exposure, mode="fixed"), 0.0, img, visible) == 0.0  # fixed: as set
+    assert exposure_shift_ev(replace(exposure, mode="fixed"), 0.0, img, visible) == 0.0  # fixed: as set
 
 
 @pytest.mark.parametrize("preset", ["default", "ccd"])
@@ -129,13 +129,13 @@ def test_a_saturated_disc_stays_a_disc_on_the_default_sensor_and_spills_along_co
     """The default camera's sensor drains charge above the full well (anti-blooming): only the disc
     saturates. The CCD preset's wells spill along their columns: straight streaks above and below the
     disc, exactly as wide as it, conserving the charge up to the sensor's edges."""
-    camera = camera_preset(preset)
-    sensor = dict(camera["sensor"], hot_pixel_frac=0.0, dead_pixel_frac=0.0)
+    camera = preset_settings(preset)
+    sensor = replace(camera.sensor, hot_pixel_frac=0.0, dead_pixel_frac=0.0)
     value = np.full((200, 120, 1), 0.1, np.float32)
     y, x = np.mgrid[0:200, 0:120]
     disc = (y - 100) ** 2 + (x - 60) ** 2 <= 6**2
     value[disc] = 30.0  # 30 wells of charge per disc pixel
-    out = expose(value, sensor, 1.0, camera["glare"]["blooming"], 0, np.random.default_rng(0))[..., 0]
+    out = expose(value, sensor, 1.0, camera.glare.blooming, 0, np.random.default_rng(0))[..., 0]
     saturated = out > 0.99  # a full well reads the top code give or take its read noise
     if preset == "default":
         assert np.array_equal(saturated, disc)
@@ -193,11 +193,11 @@ def test_sun_in_view_flares_over_the_image_unless_the_target_hides_it():
     img = np.zeros((120, 160, 3), np.float32)
     rng = np.random.default_rng(0)
     clear = np.zeros((120, 160), np.int32)
-    flared, present = glare.sun_flare(img, spec, clear, 0.0, spec.imaging.camera["glare"], rng)
+    flared, present = glare.sun_flare(img, spec, clear, 0.0, spec.imaging.camera.glare, rng)
     assert present and flared.min() > 0  # veiling glare over every pixel
     assert flared.max() > 1e3  # the sun's disc itself
     hidden = np.full((120, 160), TARGET_ID, np.int32)
-    dark, present = glare.sun_flare(img, spec, hidden, 0.0, spec.imaging.camera["glare"], rng)
+    dark, present = glare.sun_flare(img, spec, hidden, 0.0, spec.imaging.camera.glare, rng)
     assert not present and dark.max() == 0.0
 
 
@@ -205,7 +205,7 @@ def test_sun_behind_the_camera_never_flares():
     spec = _spec_with_sun((0.0, 0.0, -1.0))
     img = np.zeros((120, 160, 3), np.float32)
     out, present = glare.sun_flare(img, spec, np.zeros((120, 160), np.int32), 0.0,
-                                   spec.imaging.camera["glare"], np.random.default_rng(0))  # fmt: skip
+                                   spec.imaging.camera.glare, np.random.default_rng(0))  # fmt: skip
     assert not present and out is img
 
 

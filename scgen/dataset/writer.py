@@ -194,7 +194,7 @@ def build_record(
         "qz": q[3],
         "viewpoint_cell": viewpoint_cell(R, t),
         "combination_key": spec_key(spec),
-        "camera": imaging.camera["preset"],
+        "camera": imaging.camera.preset,
         "noise": noise_group(snr),
         "noise_gain": imaging.gain,
         "mid_grey_snr": "" if snr is None else snr,

@@ -1,77 +1,146 @@
-"""The camera table of the sampling config: intrinsics, lens, exposure, optics, glare, sensor, output.
+"""The camera's settings: intrinsics, lens, exposure, optics, glare, sensor, output.
 
-One table of presets (`CAMERA_PRESETS`): each entry overrides the `default` camera, which is the
-config's built-in `camera` section. Every key carries a physical unit in its name or in
-docs/config.md; ranges are [min, max] drawn uniformly per image (the gain log-uniformly).
+`CameraSettings` and its section dataclasses are the one home of every key, its default and its unit;
+the config's built-in `camera` section (`DEFAULT_CAMERA`) is their table. One table of presets
+(`CAMERA_PRESETS`): each entry overrides the `default` camera. A config's table is checked once at load
+(`check_camera`) and travels typed with each image (ImagingSpec.camera) to the camera stage. Ranges are
+[min, max] drawn uniformly per image (the gain log-uniformly).
 """
 
 from __future__ import annotations
 
 import copy
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from scgen.errors import ScgenError
 from scgen.scenes.checks import check_choice, check_positive, check_prob, check_range
 
-DEFAULT_CAMERA: dict[str, Any] = {
-    "preset": "default",
-    "width": 640,
-    "height": 480,
-    "fx": 600.0,
-    "fy": 600.0,
-    "cx": None,  # None: (width - 1) / 2, the image centre under the pixel-centre convention
-    "cy": None,
-    "dist": [0.0, 0.0, 0.0, 0.0, 0.0],  # OpenCV k1, k2, p1, p2, k3 (normalised coordinates)
-    "exposure_ev": 0.0,  # base exposure (EV); +1 EV halves every image value
-    "exposure": {
-        "mode": "range",  # fixed | range | auto
-        "ev_range": [-0.5, 0.5],  # range: EV added per image
-        "auto_target": 0.18,  # auto: mean linear value of the target's visible pixels
-        "auto_limits_ev": [-6.0, 6.0],  # auto: the EV it may add; the upper end caps highlight protection
-        # range and auto: highlight protection, as a camera's auto-exposure does it: the exposure is shortened
-        # (EV raised) until at most this share of the frame's pixels clips (scgen.render.camera.exposure;
-        # docs/config.md says why 3 %)
-        "max_clipped": 0.03,
-    },
-    "optics": {
-        "psf": "gaussian",  # gaussian | defocus (a uniform disc)
-        "psf_fwhm_px": [0.7, 1.6],  # FWHM of the PSF (a disc's diameter), px
-        "motion_blur_prob": 0.3,
-        "motion_blur_px": [1.0, 4.0],  # line length, px; direction uniform
-        "vignetting": [0.0, 0.25],  # share of light lost at the farthest image corner
-        "chromatic_px": [0.0, 0.4],  # lateral colour: red/blue shift at the farthest corner, px
-    },
-    "glare": {
-        "blooming": False,  # true: charge above the full well spills along columns (CCD, no anti-blooming)
-        "bloom": 0.02,  # share of light above saturation scattered into the wide PSF
-        "bloom_radius_px": 40.0,  # half-width of the wide PSF, px
-        "spikes": 6,  # diffraction spikes of the wide PSF (0: none)
-        "flare": True,  # ghosts and veiling glare from the sun in or near the field of view
-        "flare_ghosts": [3, 7],
-        "ghost_share": [1e-5, 3e-4],  # light in each ghost, as a share of the sun's light on the sensor
-        "veiling_glare": 0.005,  # share of the sun's light on the sensor scattered over the image
-    },
-    "sensor": {
-        "enabled": True,
-        "full_well_e": 10500.0,  # e-
-        "full_well_value": 1.0,  # linear image value that fills the well at gain 1
-        "gain": [1.0, 16.0],  # analog gain per image (log-uniform): the noise level
-        "read_noise_e": 2.5,  # e- rms
-        "dark_current_e_s": 25.0,  # e-/s per pixel
-        "exposure_time_s": 0.01,
-        "prnu": 0.01,  # photo-response non-uniformity, rms share; fixed per dataset
-        "hot_pixel_frac": 1e-4,  # fixed per dataset
-        "hot_pixel_e_s": 2e4,  # dark current of a hot pixel, e-/s
-        "dead_pixel_frac": 5e-5,  # fixed per dataset
-        "adc_bits": 12,
-    },
-    "output": {
-        "mono": False,  # one-channel images (luminance), as SPEED/SPEED+
-        "bits": 8,  # 8 or 16 (PNG only)
-        "curve": "srgb",  # srgb | linear
-        "jpeg_quality": [85, 95],  # with --rgb-format jpg, drawn per image
-    },
-}
+Range = tuple[float, float]  # [min, max], drawn uniformly per image
+
+
+@dataclass(frozen=True)
+class ExposureSettings:
+    """How each image's exposure is chosen (scgen.render.camera.exposure)."""
+
+    mode: str = "range"  # fixed | range | auto
+    ev_range: Range = (-0.5, 0.5)  # range: EV added per image
+    auto_target: float = 0.18  # auto: mean linear value of the target's visible pixels
+    auto_limits_ev: Range = (-6.0, 6.0)  # auto: the EV it may add; the upper end caps highlight protection
+    # range and auto: highlight protection, as a camera's auto-exposure does it: the exposure is shortened (EV
+    # raised) until at most this share of the frame's pixels clips (docs/config.md says why 3 %)
+    max_clipped: float = 0.03
+
+
+@dataclass(frozen=True)
+class OpticsSettings:
+    """The lens between the scene and the sensor (scgen.render.camera.optics)."""
+
+    psf: str = "gaussian"  # gaussian | defocus (a uniform disc)
+    psf_fwhm_px: Range = (0.7, 1.6)  # FWHM of the PSF (a disc's diameter), px
+    motion_blur_prob: float = 0.3
+    motion_blur_px: Range = (1.0, 4.0)  # line length, px; direction uniform
+    vignetting: Range = (0.0, 0.25)  # share of light lost at the farthest image corner
+    chromatic_px: Range = (0.0, 0.4)  # lateral colour: red/blue shift at the farthest corner, px
+
+
+@dataclass(frozen=True)
+class GlareSettings:
+    """Over-exposure: bloom, column blooming and the sun's flare (scgen.render.camera.glare)."""
+
+    blooming: bool = False  # true: charge above the full well spills along columns (CCD, no anti-blooming)
+    bloom: float = 0.02  # share of light above saturation scattered into the wide PSF
+    bloom_radius_px: float = 40.0  # half-width of the wide PSF, px
+    spikes: int = 6  # diffraction spikes of the wide PSF (0: none)
+    flare: bool = True  # ghosts and veiling glare from the sun in or near the field of view
+    flare_ghosts: tuple[int, int] = (3, 7)  # ghosts per flare
+    ghost_share: Range = (1e-5, 3e-4)  # light in each ghost, as a share of the sun's light on the sensor
+    veiling_glare: float = 0.005  # share of the sun's light on the sensor scattered over the image
+
+
+@dataclass(frozen=True)
+class SensorSettings:
+    """Photo-electrons to digital values (scgen.render.camera.sensor)."""
+
+    enabled: bool = True
+    full_well_e: float = 10500.0  # e-
+    full_well_value: float = 1.0  # linear image value that fills the well at gain 1
+    gain: Range = (1.0, 16.0)  # analog gain per image (log-uniform): the noise level
+    read_noise_e: float = 2.5  # e- rms
+    dark_current_e_s: float = 25.0  # e-/s per pixel
+    exposure_time_s: float = 0.01  # s
+    prnu: float = 0.01  # photo-response non-uniformity, rms share; fixed per dataset
+    hot_pixel_frac: float = 1e-4  # share of pixels, fixed per dataset
+    hot_pixel_e_s: float = 2e4  # dark current of a hot pixel, e-/s
+    dead_pixel_frac: float = 5e-5  # share of pixels, fixed per dataset
+    adc_bits: int = 12
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """The file's pixels (scgen.render.camera.output)."""
+
+    mono: bool = False  # one-channel images (luminance), as SPEED/SPEED+
+    bits: int = 8  # 8 or 16 (PNG only)
+    curve: str = "srgb"  # srgb | linear
+    jpeg_quality: tuple[int, int] = (85, 95)  # with --rgb-format jpg, drawn per image
+
+
+SECTIONS = {"exposure": ExposureSettings, "optics": OpticsSettings, "glare": GlareSettings,
+            "sensor": SensorSettings, "output": OutputSettings}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    """The camera table, typed: what travels with each image (ImagingSpec.camera) to the camera stage.
+
+    The config's `camera` section is its `table()`; `from_table` types a resolved, checked one.
+    """
+
+    preset: str = "default"
+    width: int = 640  # px
+    height: int = 480  # px
+    fx: float = 600.0  # px
+    fy: float = 600.0  # px
+    cx: float | None = None  # px; None: (width - 1) / 2, the image centre under the pixel-centre convention
+    cy: float | None = None  # px
+    dist: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)  # OpenCV k1, k2, p1, p2, k3 (normalised coordinates)
+    exposure_ev: float = 0.0  # base exposure (EV); +1 EV halves every image value
+    exposure: ExposureSettings = field(default_factory=ExposureSettings)
+    optics: OpticsSettings = field(default_factory=OpticsSettings)
+    glare: GlareSettings = field(default_factory=GlareSettings)
+    sensor: SensorSettings = field(default_factory=SensorSettings)
+    output: OutputSettings = field(default_factory=OutputSettings)
+
+    @staticmethod
+    def from_table(table: dict[str, Any]) -> CameraSettings:
+        """From a camera table (check_camera's job is done: this only types it; lists become tuples)."""
+
+        def typed(key: str, value: Any) -> Any:
+            return (
+                SECTIONS[key](**{k: _tupled(v) for k, v in value.items()})
+                if key in SECTIONS
+                else _tupled(value)
+            )
+
+        return CameraSettings(**{key: typed(key, value) for key, value in table.items()})
+
+    def table(self) -> dict[str, Any]:
+        """The camera table (plain dicts and lists), as the config holds it and config.json shows it."""
+        return _listed(asdict(self))
+
+
+def _tupled(value: Any) -> Any:
+    return tuple(value) if isinstance(value, list) else value
+
+
+def _listed(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _listed(v) for k, v in value.items()}
+    return list(value) if isinstance(value, tuple) else value
+
+
+DEFAULT_CAMERA: dict[str, Any] = CameraSettings().table()
 
 CAMERA_PRESETS: dict[str, dict[str, Any]] = {
     "ideal": {  # the images before the camera stage: a perfect pinhole camera at a fixed exposure
@@ -118,6 +187,11 @@ def camera_preset(name: str) -> dict[str, Any]:
             table[key] = copy.deepcopy(value)
     table["preset"] = name
     return table
+
+
+def preset_settings(name: str) -> CameraSettings:
+    """A preset's typed settings."""
+    return CameraSettings.from_table(camera_preset(name))
 
 
 def scale_pixel_sizes(camera: dict[str, Any], s: float) -> None:

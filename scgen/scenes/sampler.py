@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from scgen.scenes.attitude import sample_attitude
+from scgen.scenes.camera_config import CameraSettings
 from scgen.scenes.config import USER_BACKGROUND, distance_range_m
 from scgen.scenes.finish import sample_finish
 from scgen.scenes.geometry import (
@@ -45,6 +46,7 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
     """
     diameter_m = shape.diameter
     camera = CameraSpec.from_config(cfg["camera"])
+    camera_settings = CameraSettings.from_table(cfg["camera"])
     K = camera.K_mat
     f = camera.focal
 
@@ -89,7 +91,7 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
         props=tuple(occluders + caster + clutter),
         requested_occlusion=occ_group,
         shadow_caster=bool(caster),
-        imaging=sample_imaging(factor_rng(seed, index, "camera"), cfg["camera"]),
+        imaging=sample_imaging(factor_rng(seed, index, "camera"), camera_settings),
         finish=sample_finish(factor_rng(seed, index, "finish"), cfg["finish"]),
         cone=cone,
     )

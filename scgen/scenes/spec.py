@@ -13,6 +13,7 @@ import numpy as np
 
 from scgen.io import bop
 from scgen.scenes.attitude import ConeDraw
+from scgen.scenes.camera_config import CameraSettings
 from scgen.scenes.geometry import focal_length, project
 from scgen.scenes.lens import distort, is_pinhole, undistort
 
@@ -153,7 +154,7 @@ class ImagingSpec:
     ev_shift: EV added to the base exposure (0 in fixed and auto mode: auto decides it from the image);
     gain: analog gain (the noise level); psf_fwhm_px; motion blur length (px) and direction (deg);
     vignetting (light lost at the farthest corner); chromatic_px; jpeg_quality; noise_seed seeds the
-    pixel noise and the flare's ghosts. `camera` is the resolved camera table (sensor, optics, ...).
+    pixel noise and the flare's ghosts. `camera` is the camera's typed settings (sensor, optics, ...).
     """
 
     ev_shift: float
@@ -165,7 +166,7 @@ class ImagingSpec:
     chromatic_px: float
     jpeg_quality: int
     noise_seed: int
-    camera: dict[str, Any] = field(default_factory=dict)
+    camera: CameraSettings = field(default_factory=CameraSettings)
 
 
 @dataclass(frozen=True)
@@ -227,7 +228,11 @@ class SceneSpec:
             ),
             requested_occlusion=d["requested_occlusion"],
             shadow_caster=bool(d["shadow_caster"]),
-            imaging=ImagingSpec(**d["imaging"]) if d.get("imaging") else None,
+            imaging=_imaging(d["imaging"]) if d.get("imaging") else None,
             finish=d.get("finish", {}),
             cone=ConeDraw(**d["cone"]) if d.get("cone") else None,
         )
+
+
+def _imaging(d: dict[str, Any]) -> ImagingSpec:
+    return ImagingSpec(**{**d, "camera": CameraSettings.from_table(d["camera"])})

@@ -2,23 +2,22 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from scgen.render.camera.sensor import expose
+from scgen.scenes.camera_config import SensorSettings
 from scgen.scenes.imaging import electrons_per_value
 
 PTC_STEPS = 10
 
 
-def photon_transfer(sensor: dict[str, Any], gain: float, size: int = 128) -> tuple[float, float]:
+def photon_transfer(sensor: SensorSettings, gain: float, size: int = 128) -> tuple[float, float]:
     """(conversion gain in codes per e-, read noise in e-) fitted to var = K * mean + K^2 * sigma^2 over
     flat fields from a few tens of electrons to half the ADC's range. Two frames per level, differenced,
     so the fixed pattern (PRNU) cancels; relative weights, as photon-transfer curves are fitted; the
     codes' 1/12 quantisation variance removed."""
-    top = 2 ** sensor["adc_bits"] - 1
-    lowest_e = max(20.0, 3 * sensor["read_noise_e"] ** 2)  # the noise floor a quarter of the variance or less
+    top = 2**sensor.adc_bits - 1
+    lowest_e = max(20.0, 3 * sensor.read_noise_e**2)  # the noise floor a quarter of the variance or less
     lowest = min(lowest_e / electrons_per_value(sensor, gain), 0.05)  # ...and nothing clips at zero
     means, variances = [], []
     for k, level in enumerate(np.geomspace(lowest, 0.5, PTC_STEPS)):

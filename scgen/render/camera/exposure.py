@@ -10,11 +10,10 @@ setting keeps from clipping). A `fixed` exposure is left as it is.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from scgen.render.conventions import LUMA
+from scgen.scenes.camera_config import ExposureSettings
 
 LUMA_32 = LUMA.astype(np.float32)  # float32 images stay float32
 CLIP_MARGIN_EV = 1e-5  # keeps the (k+1)-th brightest pixel below 1 after float32 rounding
@@ -26,25 +25,25 @@ def luminance(image: np.ndarray) -> np.ndarray:
 
 
 def exposure_shift_ev(
-    exposure: dict[str, Any], drawn_ev: float, image: np.ndarray, visible: np.ndarray
+    exposure: ExposureSettings, drawn_ev: float, image: np.ndarray, visible: np.ndarray
 ) -> float:
     """EV added to the base exposure (the image at base exposure is `image`): the drawn shift, or (auto)
     the one that brings the mean luminance of the target's visible pixels to `auto_target`, within
     `auto_limits_ev` (0 when the target is unseen); then raised by highlight protection (not `fixed`)."""
-    if exposure["mode"] == "fixed":
+    if exposure.mode == "fixed":
         return drawn_ev
-    shift = drawn_ev if exposure["mode"] == "range" else metered_ev(exposure, image, visible)
-    return max(shift, min(highlight_ev(image, exposure["max_clipped"]), exposure["auto_limits_ev"][1]))
+    shift = drawn_ev if exposure.mode == "range" else metered_ev(exposure, image, visible)
+    return max(shift, min(highlight_ev(image, exposure.max_clipped), exposure.auto_limits_ev[1]))
 
 
-def metered_ev(exposure: dict[str, Any], image: np.ndarray, visible: np.ndarray) -> float:
+def metered_ev(exposure: ExposureSettings, image: np.ndarray, visible: np.ndarray) -> float:
     """Auto-exposure on the target: the EV that brings its visible pixels' mean luminance to
     `auto_target`, within `auto_limits_ev` (0 when the target is unseen)."""
     if not visible.any():
         return 0.0
-    lo, hi = exposure["auto_limits_ev"]
+    lo, hi = exposure.auto_limits_ev
     mean = float(luminance(image)[visible].mean())
-    return float(np.clip(np.log2(mean / exposure["auto_target"]), lo, hi)) if mean > 0 else float(lo)
+    return float(np.clip(np.log2(mean / exposure.auto_target), lo, hi)) if mean > 0 else float(lo)
 
 
 def highlight_ev(image: np.ndarray, max_clipped: float) -> float:

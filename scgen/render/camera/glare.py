@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
@@ -16,6 +15,7 @@ import numpy as np
 from scgen.render.camera import optics
 from scgen.render.conventions import LUMA
 from scgen.render.lighting import SOLAR_CONSTANT
+from scgen.scenes.camera_config import GlareSettings
 from scgen.scenes.spec import CameraSpec, SceneSpec
 
 SUN_ANGULAR_RADIUS = np.deg2rad(0.2666)  # at 1 AU
@@ -82,14 +82,14 @@ def sun_view(camera: CameraSpec, sun_dir: np.ndarray) -> SunView | None:
 
 
 def sun_flare(image: np.ndarray, spec: SceneSpec, instance: np.ndarray, ev_total: float,
-              glare: dict[str, Any], rng: np.random.Generator) -> tuple[np.ndarray, bool]:  # fmt: skip
+              glare: GlareSettings, rng: np.random.Generator) -> tuple[np.ndarray, bool]:  # fmt: skip
     """The sun's disc (where it is seen past every object), veiling glare and ghosts along the line from
     the sun's image through the principal point, all scaled by the sun's irradiance and the exposure.
     Returns the image and whether a flare was drawn."""
     camera = spec.camera
     s = np.asarray(spec.sun.direction, np.float64)
     view = sun_view(camera, s)
-    if not glare["flare"] or view is None or view.off_view_rad > FLARE_REACH_RAD:
+    if not glare.flare or view is None or view.off_view_rad > FLARE_REACH_RAD:
         return image, False
     plate = spec.sun.irradiance / SOLAR_CONSTANT * 2.0 ** (-ev_total)  # value of a white plate facing it
     h, w = image.shape[:2]
@@ -113,13 +113,13 @@ def sun_flare(image: np.ndarray, spec: SceneSpec, instance: np.ndarray, ev_total
     diag = float(np.hypot(w, h))
     r = np.hypot(x - view.pixel[0], y - view.pixel[1]) / diag
     profile = 0.1 + np.exp(-r / 0.15)  # a uniform floor and a glow around the sun's image
-    veil = glare["veiling_glare"] * flux / (w * h) * profile / profile.mean()
+    veil = glare.veiling_glare * flux / (w * h) * profile / profile.mean()
     image = image + _tint(veil, image.shape[-1], np.array([1.0, 0.97, 0.9]))
     centre = K[:2, 2]
-    for _ in range(int(rng.integers(glare["flare_ghosts"][0], glare["flare_ghosts"][1] + 1))):
+    for _ in range(int(rng.integers(glare.flare_ghosts[0], glare.flare_ghosts[1] + 1))):
         at = centre + rng.uniform(-1.6, 0.9) * (view.pixel - centre)
         radius = rng.uniform(0.01, 0.08) * diag
-        turn, share = rng.uniform(0, np.pi / 3), rng.uniform(*glare["ghost_share"])
+        turn, share = rng.uniform(0, np.pi / 3), rng.uniform(*glare.ghost_share)
         colour = rng.uniform(0.5, 1.0, 3)
         x0, y0 = np.clip(np.floor(at - radius - 2).astype(int), 0, [w, h])
         x1, y1 = np.clip(np.ceil(at + radius + 3).astype(int), 0, [w, h])

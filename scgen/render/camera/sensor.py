@@ -9,18 +9,18 @@ largest code: at g > 1 it clips before the well fills; charge beyond the well bl
 from __future__ import annotations
 
 import functools
-from typing import Any
 
 import numpy as np
 
+from scgen.scenes.camera_config import SensorSettings
 from scgen.scenes.imaging import electrons_per_value
 
 POISSON_EXACT_BELOW = 30.0  # mean electrons; above it the normal approximation (same mean and variance)
 
 
-def conversion_gain(sensor: dict[str, Any], gain: float) -> float:
+def conversion_gain(sensor: SensorSettings, gain: float) -> float:
     """ADC codes per electron at this gain (the photon-transfer slope)."""
-    return (2 ** sensor["adc_bits"] - 1) / electrons_per_value(sensor, gain)
+    return (2**sensor.adc_bits - 1) / electrons_per_value(sensor, gain)
 
 
 @functools.lru_cache(maxsize=4)
@@ -92,23 +92,23 @@ def bloom_columns(electrons: np.ndarray, full_well: float) -> np.ndarray:
     return out.reshape(electrons.shape)
 
 
-def expose(value: np.ndarray, sensor: dict[str, Any], gain: float, blooming: bool, seed: int,
+def expose(value: np.ndarray, sensor: SensorSettings, gain: float, blooming: bool, seed: int,
            rng: np.random.Generator) -> np.ndarray:  # fmt: skip
     """The sensor's reading of a linear image (H x W x C, exposure applied), as linear values in [0, 1]
     quantised to the ADC's codes."""
     e_per_value = electrons_per_value(sensor, gain)
-    response, hot, dead = fixed_pattern(seed, value.shape, sensor["prnu"], sensor["hot_pixel_frac"],
-                                        sensor["dead_pixel_frac"])  # fmt: skip
-    t = sensor["exposure_time_s"]
+    response, hot, dead = fixed_pattern(seed, value.shape, sensor.prnu, sensor.hot_pixel_frac,
+                                        sensor.dead_pixel_frac)  # fmt: skip
+    t = sensor.exposure_time_s
     mean_e = np.maximum(value, 0.0) * (e_per_value * response)
-    mean_e += sensor["dark_current_e_s"] * t
-    mean_e[hot] += sensor["hot_pixel_e_s"] * t
+    mean_e += sensor.dark_current_e_s * t
+    mean_e[hot] += sensor.hot_pixel_e_s * t
     mean_e[dead] = 0.0
     electrons = shot_noise(mean_e.astype(np.float32), rng)
     if blooming:
-        electrons = bloom_columns(electrons, sensor["full_well_e"])
-    electrons = np.minimum(electrons, sensor["full_well_e"])
-    electrons += sensor["read_noise_e"] * rng.standard_normal(electrons.shape, dtype=np.float32)
-    top = 2 ** sensor["adc_bits"] - 1
+        electrons = bloom_columns(electrons, sensor.full_well_e)
+    electrons = np.minimum(electrons, sensor.full_well_e)
+    electrons += sensor.read_noise_e * rng.standard_normal(electrons.shape, dtype=np.float32)
+    top = 2**sensor.adc_bits - 1
     codes = np.clip(np.round(electrons * (top / e_per_value)), 0, top)
     return (codes / top).astype(np.float32)

@@ -29,22 +29,22 @@ def record_image(
     imaging = spec.imaging or IDEAL_IMAGING
     cam = imaging.camera
     image = to_camera(composite.astype(np.float32, copy=False), spec.camera)
-    shift = exposure_shift_ev(cam["exposure"], imaging.ev_shift, image, instance == TARGET_ID)
+    shift = exposure_shift_ev(cam.exposure, imaging.ev_shift, image, instance == TARGET_ID)
     if shift:
         image = image * np.float32(2.0 ** (-shift))
-    if cam["output"]["mono"]:
+    if cam.output.mono:
         image = luminance(image)[..., None]
     rng = np.random.default_rng([imaging.noise_seed, spec.index])
     ev_total = spec.camera.exposure_ev + shift
-    image, flared = glare.sun_flare(image, spec, instance, ev_total, cam["glare"], rng)
+    image, flared = glare.sun_flare(image, spec, instance, ev_total, cam.glare, rng)
     image = optics.vignette(image, spec.camera, imaging.vignetting)
     image = optics.lateral_colour(image, spec.camera, imaging.chromatic_px)
-    image = optics.psf_blur(image, cam["optics"]["psf"], imaging.psf_fwhm_px)
+    image = optics.psf_blur(image, cam.optics.psf, imaging.psf_fwhm_px)
     image = optics.motion_blur(image, imaging.motion_blur_px, imaging.motion_blur_deg)
-    g = cam["glare"]
-    image = glare.bloom(image, g["bloom"], g["bloom_radius_px"], g["spikes"])
-    if cam["sensor"]["enabled"]:
-        image = expose(image, cam["sensor"], imaging.gain, g["blooming"], spec.seed, rng)
+    g = cam.glare
+    image = glare.bloom(image, g.bloom, g.bloom_radius_px, g.spikes)
+    if cam.sensor.enabled:
+        image = expose(image, cam.sensor, imaging.gain, g.blooming, spec.seed, rng)
     saturated = float((image >= 1.0).mean())
-    pixels = encode(image, cam["output"]["curve"], cam["output"]["bits"])
+    pixels = encode(image, cam.output.curve, cam.output.bits)
     return pixels, CameraRecord(float(ev_total), flared, saturated)
