@@ -6,7 +6,7 @@ Prints one line per backend (files compared, files that differ) and each differi
 if any file differs.
 
 Usage: python benchmarks/same_output.py --against REV [--backends mitsuba blender] [--n 8] [--seed 21]
-       [--resolution 160x120]
+       [--resolution 160x120] [--camera speedplus]
 """
 
 from __future__ import annotations
@@ -22,13 +22,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def render(code: Path, out: Path, backend: str, n: int, seed: int, resolution: str) -> None:
+def render(
+    code: Path, out: Path, backend: str, n: int, seed: int, resolution: str, camera: str | None
+) -> None:
     """`scgen render` of the job with the scgen package found in `code`."""
     env = {**os.environ, "PYTHONPATH": str(code)}
     # a worker per core, as `scgen render` runs by default (and the code before the Mitsuba thread default,
     # 2150d39, ran its workers on one thread each only then)
     options = {"--n": n, "--seed": seed, "--out": out, "--backend": backend, "--resolution": resolution,
                "--quality": "draft", "--workers": os.cpu_count() or 1}  # fmt: skip
+    if camera:
+        options["--camera"] = camera
     command = [
         sys.executable,
         "-m",
@@ -56,6 +60,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=8)
     ap.add_argument("--seed", type=int, default=21)
     ap.add_argument("--resolution", default="160x120")
+    ap.add_argument("--camera", help="camera preset (e.g. speedplus: through a lens); default: the config's")
     args = ap.parse_args()
     failed = False
     with tempfile.TemporaryDirectory() as tmp:
@@ -66,8 +71,8 @@ def main() -> None:
         try:
             for backend in args.backends:
                 before, after = Path(tmp) / f"{backend}_before", Path(tmp) / f"{backend}_after"
-                render(old, before, backend, args.n, args.seed, args.resolution)
-                render(ROOT, after, backend, args.n, args.seed, args.resolution)
+                render(old, before, backend, args.n, args.seed, args.resolution, args.camera)
+                render(ROOT, after, backend, args.n, args.seed, args.resolution, args.camera)
                 count, differ = differing_files(before, after)
                 print(f"{backend}: {count} files compared, {len(differ)} differ")
                 for path in differ:
