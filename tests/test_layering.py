@@ -28,6 +28,10 @@ FLOORS = (
 )
 # the package root's lazy `scgen.Generator` (__getattr__): the API's front door, loaded on first use only
 FRONT_DOOR = "scgen -> scgen.generator"
+LAZY = {
+    "scgen.Generator": "scgen.generator",
+    "scgen.Sample": "scgen.generator",
+}  # `from scgen import Generator`
 POSENET_GATE = "scgen.io"  # the one module posenet reads scgen datasets through
 CLI_MODULES = {"scgen/cli.py", "posenet/cli.py", "posenet/console.py"}
 CLI_IMPORTS = {"click", "scgen.cli", "posenet.cli"}
@@ -104,8 +108,9 @@ def module_imports(tree: ast.AST, modules: set[str]) -> set[str]:
         if isinstance(node, ast.Import):
             found |= {a.name for a in node.names}
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            found |= {f"{node.module}.{a.name}" if f"{node.module}.{a.name}" in modules else node.module
-                      for a in node.names}  # fmt: skip
+            for a in node.names:
+                full = f"{node.module}.{a.name}"
+                found.add(full if full in modules else LAZY.get(full, node.module))
         stack.extend(ast.iter_child_nodes(node))
     return found & modules
 
@@ -145,6 +150,11 @@ def test_scgen_imports_only_downward() -> None:
     assert [m for m in sorted(modules) if floor(m, FLOORS) is None] == []  # every module has a floor
     assert upward_imports(ROOT, "scgen", FLOORS) == [FRONT_DOOR]
     assert "scgen.generator" not in loaded_modules("scgen")
+
+
+def test_the_floor_check_sees_the_api_reached_through_the_package_root() -> None:
+    tree = ast.parse("from scgen import Generator\n")
+    assert module_imports(tree, {"scgen", "scgen.generator"}) == {"scgen.generator"}
 
 
 def test_the_floor_check_sees_an_upward_import(tmp_path: Path) -> None:

@@ -1,6 +1,6 @@
 """GDR-Net / GAP-GDRNet pose networks: `create_model(variant, preset, **overrides)` builds every one."""
 
-from .config import PRESETS, VARIANTS, ModelConfig, Variant
-from .posenet import PoseNet, create_model
+from posenet.models.config import PRESETS, VARIANTS, ModelConfig, Variant
+from posenet.models.posenet import PoseNet, create_model
 
 __all__ = ["PRESETS", "VARIANTS", "ModelConfig", "PoseNet", "Variant", "create_model"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from .layers import conv1x1
+from posenet.models.layers import conv1x1
 
 
 class GGCA(nn.Module):

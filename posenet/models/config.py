@@ -11,8 +11,7 @@ from typing import Any, NamedTuple
 import timm
 
 from posenet.errors import PosenetError
-
-from .layers import NORMS
+from posenet.models.layers import NORMS
 
 
 class Variant(NamedTuple):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from torch import Tensor, nn
 
-from .layers import conv_norm_relu, norm2d
+from posenet.models.layers import conv_norm_relu, norm2d
 
 
 def top_down_decoder(in_channels: int, channels: int, norm: str) -> nn.Sequential:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from .layers import conv_norm_relu
+from posenet.models.layers import conv_norm_relu
 
 
 class PGSA(nn.Module):

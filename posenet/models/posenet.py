@@ -7,11 +7,11 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from .afr import AFR
-from .backbone import Backbone
-from .config import ModelConfig
-from .geo_head import GeoHead
-from .pnp import PatchPnP
+from posenet.models.afr import AFR
+from posenet.models.backbone import Backbone
+from posenet.models.config import ModelConfig
+from posenet.models.geo_head import GeoHead
+from posenet.models.pnp import PatchPnP
 
 
 def pnp_in_channels(num_regions: int) -> int:

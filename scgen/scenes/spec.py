@@ -149,7 +149,7 @@ class BackgroundSpec:
 
 @dataclass(frozen=True)
 class ImagingSpec:
-    """The camera stage's per-image draws (scgen.scenes.imaging) and the camera table they came from.
+    """The camera stage's per-image draws (scgen.scenes.imaging) and the camera settings they came from.
 
     ev_shift: EV added to the base exposure (0 in fixed and auto mode: auto decides it from the image);
     gain: analog gain (the noise level); psf_fwhm_px; motion blur length (px) and direction (deg);

@@ -19,10 +19,10 @@ from dataclasses import replace
 from typing import Any
 
 import drjit as dr
+import mitsuba as mi
 import numpy as np
 from trimesh.transformations import transform_points
 
-import mitsuba as mi
 from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.camera import record_image, render_camera
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, MITSUBA_THREADS, check_quality, render_seed

@@ -9,9 +9,9 @@ of a new transform made opaque), and a frozen render reads them from that memory
 from __future__ import annotations
 
 import drjit as dr
+import mitsuba as mi
 import numpy as np
 
-import mitsuba as mi
 from scgen.render.conventions import CLIP_START_M, EARTHSHINE_COLOUR
 from scgen.render.lighting import body_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba.memory import channels, check_held, overwrite, own_scalars

@@ -13,9 +13,9 @@ import functools
 from typing import Any
 
 import drjit as dr
+import mitsuba as mi
 import numpy as np
 
-import mitsuba as mi
 from scgen.render.mitsuba.memory import aligned, channels, check_held, overwrite, own_scalars
 from scgen.scenes.finish import finished
 from scgen.scenes.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material

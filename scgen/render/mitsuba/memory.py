@@ -13,9 +13,8 @@ from collections.abc import Iterable
 from typing import Any
 
 import drjit as dr
-import numpy as np
-
 import mitsuba as mi
+import numpy as np
 
 ALIGNMENT = 64  # bytes: the widest vector loads of Dr.Jit's LLVM backend (AVX-512)
 

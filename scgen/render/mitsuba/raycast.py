@@ -8,9 +8,9 @@ Mitsuba ray cast as the Mitsuba backend's geometric passes.
 from __future__ import annotations
 
 import drjit as dr
+import mitsuba as mi
 import numpy as np
 
-import mitsuba as mi
 from scgen.render.mitsuba.backend import cast_rays, select_variant
 from scgen.scenes.spec import CameraSpec
 

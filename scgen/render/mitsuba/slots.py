@@ -16,9 +16,9 @@ from __future__ import annotations
 from typing import Any
 
 import drjit as dr
+import mitsuba as mi
 import numpy as np
 
-import mitsuba as mi
 from scgen.render.mitsuba.memory import aligned, aligned_empty, overwrite
 
 
