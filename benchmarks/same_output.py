@@ -17,9 +17,24 @@ import os
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+@contextmanager
+def revision_tree(rev: str) -> Iterator[Path]:
+    """A temporary folder holding `tmp/code`, the tree at git revision `rev` (a detached worktree, removed on
+    exit), for a child process to import scgen from (PYTHONPATH)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        code = Path(tmp) / "code"
+        subprocess.run(["git", "worktree", "add", "--detach", "-q", str(code), rev], cwd=ROOT, check=True)
+        try:
+            yield Path(tmp)
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(code)], cwd=ROOT, check=True)
 
 
 def render(
@@ -63,23 +78,16 @@ def main() -> None:
     ap.add_argument("--camera", help="camera preset (e.g. speedplus: through a lens); default: the config's")
     args = ap.parse_args()
     failed = False
-    with tempfile.TemporaryDirectory() as tmp:
-        old = Path(tmp) / "code"
-        subprocess.run(
-            ["git", "worktree", "add", "--detach", "-q", str(old), args.against], cwd=ROOT, check=True
-        )
-        try:
-            for backend in args.backends:
-                before, after = Path(tmp) / f"{backend}_before", Path(tmp) / f"{backend}_after"
-                render(old, before, backend, args.n, args.seed, args.resolution, args.camera)
-                render(ROOT, after, backend, args.n, args.seed, args.resolution, args.camera)
-                count, differ = differing_files(before, after)
-                print(f"{backend}: {count} files compared, {len(differ)} differ")
-                for path in differ:
-                    print(f"  differs: {path}")
-                failed |= bool(differ)
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, check=True)
+    with revision_tree(args.against) as tmp:
+        for backend in args.backends:
+            before, after = tmp / f"{backend}_before", tmp / f"{backend}_after"
+            render(tmp / "code", before, backend, args.n, args.seed, args.resolution, args.camera)
+            render(ROOT, after, backend, args.n, args.seed, args.resolution, args.camera)
+            count, differ = differing_files(before, after)
+            print(f"{backend}: {count} files compared, {len(differ)} differ")
+            for path in differ:
+                print(f"  differs: {path}")
+            failed |= bool(differ)
     sys.exit(1 if failed else 0)
 
 

@@ -1,8 +1,9 @@
 """Draw docs/camera_before_after.jpg: the same samples rendered with the code at another revision and
 with this tree, side by side, and print the two renders' over-exposure and factor-group tables.
 
-    python docs/before_after_figure.py --before b970dd6 [--seed 7] [--ids 15 75 ...] [--resolution 640x480]
-        [--backend mitsuba] [--out docs/camera_before_after.jpg] [--tables BEFORE_DIR AFTER_DIR]
+    python benchmarks/camera_before_after.py --before b970dd6 [--seed 7] [--ids 15 75 ...]
+        [--resolution 640x480] [--backend mitsuba] [--out docs/camera_before_after.jpg]
+        [--tables BEFORE_DIR AFTER_DIR]
 
 Each sample is rendered in memory as `scgen render` writes it (scgen.Generator, default config and
 camera), once by a child process importing scgen from a temporary git worktree of REV and once with
@@ -20,13 +21,12 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
+from same_output import ROOT, revision_tree
 
-ROOT = Path(__file__).resolve().parents[1]
 # seed 7: the most clipped before (earth, cluttered), the sun near the view, complex skies, nominal finishes
 IDS = (1098, 2109, 576, 15, 535, 1820, 75, 180, 347, 386, 2, 4, 6, 3, 31, 74)
 PANEL = (320, 240)
@@ -117,17 +117,10 @@ def main() -> None:
         tables(*args.tables)
     if not args.before:
         return
-    with tempfile.TemporaryDirectory() as tmp:
-        old = Path(tmp) / "code"
-        subprocess.run(
-            ["git", "worktree", "add", "--detach", "-q", str(old), args.before], cwd=ROOT, check=True
-        )
-        try:
-            render_with(old, Path(tmp) / "before", args)
-            render_with(ROOT, Path(tmp) / "after", args)
-            figure = grid(Path(tmp) / "before", Path(tmp) / "after", args.ids, args.before[:7])
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT, check=True)
+    with revision_tree(args.before) as tmp:
+        render_with(tmp / "code", tmp / "before", args)
+        render_with(ROOT, tmp / "after", args)
+        figure = grid(tmp / "before", tmp / "after", args.ids, args.before[:7])
     cv2.imwrite(str(args.out), figure, [cv2.IMWRITE_JPEG_QUALITY, 88])
     print(f"wrote {args.out} ({figure.shape[1]}x{figure.shape[0]})")
 
