@@ -76,6 +76,15 @@ def test_posenet_never_imports_a_renderer() -> None:
     assert renderer_modules(loaded_modules(*(module_name(ROOT, p) for p in paths))) == set()
 
 
+def test_posenet_loads_no_export_encoder() -> None:
+    """posenet's command line reaches scgen's export registry through scgen.cli; a GPU node that runs
+    posenet from a checkout carries what training reads, so importing every posenet module loads no
+    export encoder (pycocotools, imported where a COCO mask is encoded)."""
+    paths = sorted(ROOT.glob("posenet/**/*.py"))
+    loaded = loaded_modules(*(module_name(ROOT, p) for p in paths))
+    assert "scgen.dataset.export.coco" in loaded and "pycocotools" not in loaded
+
+
 def imported_names(path: Path) -> set[str]:
     names = set()
     for node in ast.walk(ast.parse(path.read_text())):

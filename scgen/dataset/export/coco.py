@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pycocotools import mask as mask_utils
 
 import scgen
 from scgen.dataset.export.output import ExportFormat
@@ -56,6 +55,10 @@ def image_entry(source: Source, sample: Sample) -> dict[str, Any]:
 
 def rle(mask: np.ndarray) -> dict[str, Any]:
     """pycocotools' compressed RLE of a bool mask, its counts as text (JSON holds no bytes)."""
+    # imported here: the command lines load the export registry, and posenet's (a training node's) uses
+    # none of the encoders
+    from pycocotools import mask as mask_utils
+
     encoded = mask_utils.encode(np.asfortranarray(mask.astype(np.uint8)))
     return {"size": [int(n) for n in encoded["size"]], "counts": encoded["counts"].decode("ascii")}
 
