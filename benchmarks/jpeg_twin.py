@@ -2,6 +2,8 @@
 
     python benchmarks/jpeg_twin.py DATA OUT [--splits train test] [--for-training]
 
+DATA: a dataset of PNG images (`scgen render --rgb-format png`, or `--camera ideal`).
+
 Every sample's RGB is re-encoded from its lossless PNG with the writer's own encoder
 (scgen.dataset.writer.encode_rgb) at the JPEG quality its record drew (`camera.output.jpeg_quality`), so
 the twin's images are byte for byte those of a `--rgb-format jpg` render of the same seed; every other
@@ -43,7 +45,9 @@ def link_or_copy(src: Path, dst: Path) -> None:
 
 def make_twin(data: Path, out: Path, splits: list[str], for_training: bool) -> int:
     """Writes OUT; returns the number of images re-encoded."""
-    layout, _ = open_dataset(data)
+    layout, manifest = open_dataset(data)
+    if manifest["rgb_format"] != "png":
+        raise SystemExit(f"error: {data} holds {manifest['rgb_format']} images, not PNG")
     twin = Layout(out)
     skips = POSENET_SKIPS if for_training else set()
     left_out = set(split_names(data)) - set(splits)

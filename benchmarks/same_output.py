@@ -6,7 +6,10 @@ Prints one line per backend (files compared, files that differ) and each differi
 if any file differs.
 
 Usage: python benchmarks/same_output.py --against REV [--backends mitsuba blender] [--n 8] [--seed 21]
-       [--resolution 160x120] [--camera speedplus]
+       [--resolution 160x120] [--camera speedplus] [--rgb-format png]
+
+--rgb-format passes the format to both renders: against a revision before `--rgb-format auto` (the
+default camera's images as JPEG), `--rgb-format png` renders what both write.
 """
 
 from __future__ import annotations
@@ -38,7 +41,14 @@ def revision_tree(rev: str) -> Iterator[Path]:
 
 
 def render(
-    code: Path, out: Path, backend: str, n: int, seed: int, resolution: str, camera: str | None
+    code: Path,
+    out: Path,
+    backend: str,
+    n: int,
+    seed: int,
+    resolution: str,
+    camera: str | None,
+    rgb_format: str | None,
 ) -> None:
     """`scgen render` of the job with the scgen package found in `code`."""
     env = {**os.environ, "PYTHONPATH": str(code)}
@@ -48,6 +58,8 @@ def render(
                "--quality": "draft", "--workers": os.cpu_count() or 1}  # fmt: skip
     if camera:
         options["--camera"] = camera
+    if rgb_format:
+        options["--rgb-format"] = rgb_format
     command = [
         sys.executable,
         "-m",
@@ -76,13 +88,15 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=21)
     ap.add_argument("--resolution", default="160x120")
     ap.add_argument("--camera", help="camera preset (e.g. speedplus: through a lens); default: the config's")
+    ap.add_argument("--rgb-format", choices=["png", "jpg"], help="image format for both; default: each's own")
     args = ap.parse_args()
     failed = False
     with revision_tree(args.against) as tmp:
         for backend in args.backends:
             before, after = tmp / f"{backend}_before", tmp / f"{backend}_after"
-            render(tmp / "code", before, backend, args.n, args.seed, args.resolution, args.camera)
-            render(ROOT, after, backend, args.n, args.seed, args.resolution, args.camera)
+            job = (backend, args.n, args.seed, args.resolution, args.camera, args.rgb_format)
+            render(tmp / "code", before, *job)
+            render(ROOT, after, *job)
             count, differ = differing_files(before, after)
             print(f"{backend}: {count} files compared, {len(differ)} differ")
             for path in differ:

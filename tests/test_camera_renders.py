@@ -18,6 +18,8 @@ from posenet.errors import PosenetError
 from scgen.cli import main
 from scgen.dataset.layout import Layout
 from scgen.dataset.validate import reprojection_error, validate_dataset
+from scgen.dataset.writer import rgb_format_for
+from scgen.errors import ScgenError
 from scgen.generator import Generator
 from scgen.io import bop
 from scgen.io.exr import read_xyz_exr
@@ -72,8 +74,10 @@ def test_labels_are_byte_identical_whatever_the_camera(tmp_path: Path):
             assert a == b
     assert {r["noise"] for r in _metadata(ideal)} == {"none"}
     assert {r["noise"] for r in _metadata(default)} <= {"low", "medium", "high"}
+    # --rgb-format auto: the ideal camera's exact pixels as PNG, the sensor's noisy ones as JPEG
+    assert [bop.read_json(r / "scgen.json")["rgb_format"] for r in (ideal, default)] == ["png", "jpg"]
     images = [cv2.imread(str(p)) for p in sorted(ideal.rglob("rgb/*.png"))]
-    noisy = [cv2.imread(str(p)) for p in sorted(default.rglob("rgb/*.png"))]
+    noisy = [cv2.imread(str(p)) for p in sorted(default.rglob("rgb/*.jpg"))]
     assert all((a != b).any() for a, b in zip(images, noisy, strict=True))  # the stage did act
 
 
@@ -85,7 +89,7 @@ def test_speedplus_camera_keeps_labels_exact_through_its_lens(tmp_path: Path, ba
     layout = Layout(root)
     for rec in map(bop.read_json, layout.record_paths()):
         assert rec["scene_camera"]["cam_dist"] == pytest.approx(camera_preset("speedplus")["dist"])
-        image = cv2.imread(str(layout.rgb(rec["split"], rec["sample_id"], "png")), cv2.IMREAD_UNCHANGED)
+        image = cv2.imread(str(layout.rgb(rec["split"], rec["sample_id"], "jpg")), cv2.IMREAD_UNCHANGED)
         assert image.shape == (300, 480) and image.dtype == np.uint8  # monochrome, as SPEED+
         info = rec["scene_gt_info"][0]
         if info["xyz_box"] is None:
@@ -114,6 +118,19 @@ def test_jpeg_with_16_bit_output_is_refused_before_anything_is_written(tmp_path:
     assert result.exit_code != 0 and "camera.output.bits" in result.output
     assert len(result.output.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_auto_format_is_jpeg_for_a_camera_with_a_sensor_and_png_for_exact_images():
+    deep = camera_preset("default")
+    deep["output"]["bits"] = 16
+    assert [
+        rgb_format_for("auto", camera_preset(name)) for name in ("default", "ccd", "speedplus", "ideal")
+    ] == ["jpg", "jpg", "jpg", "png"]
+    assert rgb_format_for("auto", deep) == "png" and rgb_format_for("png", camera_preset("default")) == "png"
+    assert rgb_format_for("jpg", camera_preset("ideal")) == "jpg"  # asked for: an exact image, compressed
+    for requested, camera in (("jpg", deep), ("tiff", camera_preset("default"))):
+        with pytest.raises(ScgenError):
+            rgb_format_for(requested, camera)
 
 
 def test_unknown_camera_preset_is_one_line(tmp_path: Path):

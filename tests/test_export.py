@@ -80,7 +80,7 @@ def check_speedplus(root: Path, out: Path, dist: np.ndarray) -> None:
             assert np.abs(project(V, A, r, K, np.asarray(cam["distCoeffs"])) - expected).max() < 1e-6
             transposed.append(np.abs(project(V, A.T, r, K, d) - expected).max())
             image = out / "synthetic" / "images" / lab["filename"]
-            assert image.read_bytes() == Layout(root).rgb(split, sid).read_bytes()
+            assert image.read_bytes() == Layout(root).rgb(split, sid, image.suffix[1:]).read_bytes()
             names.append(lab["filename"])
     assert sorted(names) == sorted(p.name for p in (out / "synthetic" / "images").iterdir())
     assert max(transposed) > 10.0  # the check sees the classic bug, a transposed quaternion
@@ -129,7 +129,7 @@ def test_coco_masks_boxes_and_factors_read_back_with_pycocotools(small_dataset: 
         assert sorted(coco.getImgIds()) == sorted(ids) and coco.getCatIds() == [1]
         for sid in ids:
             img = coco.loadImgs(sid)[0]
-            assert img["file_name"] == f"{split}/000000/rgb/{sid:06d}.png"
+            assert img["file_name"] == f"{split}/000000/rgb/{sid:06d}.jpg"  # the default camera: JPEG
             assert (small_dataset / img["file_name"]).is_file()
             assert {k: str(img[k]) for k in rows[sid]} == rows[sid]  # every factor, as extra fields
             visib = cv2.imread(str(layout.mask(split, sid, visib=True)), cv2.IMREAD_UNCHANGED) > 127

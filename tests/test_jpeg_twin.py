@@ -13,10 +13,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from jpeg_twin import make_twin  # noqa: E402
 
 N = 4
+PNG = WriteOptions(rgb_format="png")
 
 
 def test_twin_images_are_the_jpg_render_byte_for_byte_and_labels_are_the_same_files(tmp_path: Path):
-    png = render_dataset(tmp_path / "png", n=N)
+    png = render_dataset(tmp_path / "png", n=N, write=PNG)
     jpg = render_dataset(tmp_path / "jpg", n=N, write=WriteOptions(rgb_format="jpg"))
     twin = tmp_path / "twin"
     assert make_twin(png, twin, ["train", "val", "test"], for_training=False) == N
@@ -30,7 +31,7 @@ def test_twin_images_are_the_jpg_render_byte_for_byte_and_labels_are_the_same_fi
 
 
 def test_for_training_keeps_what_posenet_reads(tmp_path: Path):
-    png = render_dataset(tmp_path / "png", n=N)
+    png = render_dataset(tmp_path / "png", n=N, write=PNG)
     twin = tmp_path / "twin"
     make_twin(png, twin, ["train", "test"], for_training=True)
     kinds = {p.parent.name for p in twin.rglob("*") if p.is_file()}

@@ -24,6 +24,7 @@ import numpy as np
 from scgen.annotate import Annotation
 from scgen.annotate.annotate import full_projection
 from scgen.dataset.layout import CHUNK, OBJ_ID, Layout, dumps
+from scgen.errors import ScgenError
 from scgen.io import bop
 from scgen.io.atomic import atomic_write_bytes, atomic_write_text
 from scgen.io.bop import read_json
@@ -51,9 +52,12 @@ METADATA_COLUMNS = (
 )  # fmt: skip
 
 
+RGB_FORMATS = ("auto", "png", "jpg")  # auto: the camera's (rgb_format_for)
+
+
 @dataclass(frozen=True)
 class WriteOptions:
-    rgb_format: str = "png"  # png (lossless) or jpg
+    rgb_format: str = "auto"  # auto, png (lossless) or jpg (at the camera's drawn jpeg_quality)
     xyz_dtype: str = "float16"
     save_depth: bool = True  # BOP uint16 depth maps (bop_toolkit's calc_gt_info and VSD need them)
 
@@ -81,6 +85,23 @@ def _read_target(root: Path, *_stamps: int) -> tuple[np.ndarray, np.ndarray, flo
     mesh = bop.read_model_mesh(root, OBJ_ID)
     depth_scale = float(read_json(Layout(root).camera_path)["depth_scale"])
     return np.asarray(mesh.vertices), np.asarray(mesh.faces), depth_scale
+
+
+def rgb_format_for(requested: str, camera: dict[str, Any]) -> str:
+    """The recorded images' file format: `requested` (png or jpg), or for auto the camera's: JPEG for an
+    8-bit camera with a sensor model, PNG for an exact image (no sensor model, or 16 bits).
+
+    Why: a sensor's noise is what a PNG keeps losslessly, at 12 times the bytes of a JPEG at the drawn
+    quality (486 against 41 KB at 640x480), and the JPEG costs the network nothing measurable on the
+    held-out split (docs/benchmarks.md, "What JPEG costs the network"); BOP's PBR images and SPEED+ ship
+    as JPEG. An ideal camera's pixels are exact, compress well as PNG, and stay exact."""
+    if requested not in RGB_FORMATS:
+        raise ScgenError(f"unknown rgb format {requested!r} (choose {', '.join(RGB_FORMATS)})")
+    if requested == "jpg" and camera["output"]["bits"] != 8:
+        raise ScgenError("--rgb-format jpg holds 8 bits only: camera.output.bits is 16 (use png)")
+    if requested != "auto":
+        return requested
+    return "jpg" if camera["sensor"]["enabled"] and camera["output"]["bits"] == 8 else "png"
 
 
 def encode_png(img: np.ndarray) -> bytes:

@@ -7,7 +7,7 @@ import json
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +17,13 @@ import scgen
 from scgen.dataset.layout import FORMAT, MANIFEST, OBJ_ID, Layout, dumps
 from scgen.dataset.model_files import write_eval_model_dir, write_model_dir
 from scgen.dataset.splits import SPLITS, plan_splits, split_lists
-from scgen.dataset.writer import WriteOptions, dataset_depth_scale, existing_sample_ids, finalize
+from scgen.dataset.writer import (
+    WriteOptions,
+    dataset_depth_scale,
+    existing_sample_ids,
+    finalize,
+    rgb_format_for,
+)
 from scgen.errors import ScgenError
 from scgen.generator import Generator
 from scgen.io.atomic import atomic_write_text, remove_stale_temporaries
@@ -65,6 +71,7 @@ class Plan:
     specs: list[SceneSpec]
     splits: list[str]
     keys: list[str]
+    write: WriteOptions  # the job's, its rgb format resolved for the camera (never auto)
 
 
 def validate_job(job: RenderJob) -> None:
@@ -103,11 +110,11 @@ def make_plan(job: RenderJob) -> Plan:
         backend=job.backend, quality=job.quality, device=job.device,
         threads=renderer_threads(job.backend, job.workers, job.threads),
     )  # fmt: skip
-    if job.write.rgb_format == "jpg" and generator.cfg["camera"]["output"]["bits"] != 8:
-        raise ScgenError("--rgb-format jpg holds 8 bits only: camera.output.bits is 16 (use png)")
+    rgb_format = rgb_format_for(job.write.rgb_format, generator.cfg["camera"])
     specs = sample_all(generator, job.n, job.workers)
     keys = [spec_key(s) for s in specs]
-    return Plan(generator, specs, plan_splits(keys, job.ratios, job.seed, job.split_by), keys)
+    splits = plan_splits(keys, job.ratios, job.seed, job.split_by)
+    return Plan(generator, specs, splits, keys, replace(job.write, rgb_format=rgb_format))
 
 
 def _sample_range(args: tuple[Generator, range]) -> list[SceneSpec]:
@@ -140,9 +147,9 @@ def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:
         "config_sha256": hashlib.sha256(cfg_text.encode()).hexdigest(),
         "split_by": job.split_by,
         "split_ratios": list(job.ratios),
-        "rgb_format": job.write.rgb_format,
-        "xyz_dtype": job.write.xyz_dtype,
-        "save_depth": job.write.save_depth,
+        "rgb_format": plan.write.rgb_format,
+        "xyz_dtype": plan.write.xyz_dtype,
+        "save_depth": plan.write.save_depth,
     }  # fmt: skip
 
 
@@ -204,7 +211,7 @@ def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
         for i in shard_indices(job.n, job.shard)
         if i not in done
     ]
-    settings = WorkerSettings(plan.generator, job.out, job.write)
+    settings = WorkerSettings(plan.generator, job.out, plan.write)
     timings = {"plan_s": time.perf_counter() - t_plan, "render_s": 0.0, "other_s": 0.0}
     bar = tqdm(
         total=len(tasks), unit="img", disable=not progress, file=sys.stderr, desc="render", smoothing=0.1
