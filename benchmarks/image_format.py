@@ -18,7 +18,7 @@ import argparse
 import cv2
 import numpy as np
 
-from scgen.dataset.writer import encode_rgb
+from scgen.dataset.writer import drawn_jpeg_quality, encode_rgb
 from scgen.generator import Generator
 
 FULL_COUNT = 50_000
@@ -55,8 +55,9 @@ def main() -> None:
             sample = gen.sample(i)
             rgb, visib = sample.buffers.rgb, sample.annotation.mask_visib
             sizes["png"].append(len(encode_rgb(rgb, "png")))
-            drawn = sample.spec.imaging.jpeg_quality if sample.spec.imaging else 95
-            qualities = {f"jpg q{q}": q for q in args.qualities} | {"jpg as drawn": drawn}
+            qualities = {f"jpg q{q}": q for q in args.qualities} | {
+                "jpg as drawn": drawn_jpeg_quality(sample.spec)
+            }
             for name, q in qualities.items():
                 data = encode_rgb(rgb, "jpg", q)
                 back = decode(data)

@@ -26,10 +26,11 @@ from pathlib import Path
 from tqdm import tqdm
 
 from scgen.dataset.layout import Layout, open_dataset
-from scgen.dataset.writer import encode_rgb
+from scgen.dataset.writer import drawn_jpeg_quality, encode_rgb
 from scgen.io.atomic import atomic_write_bytes
 from scgen.io.bop import split_names
 from scgen.io.image_file import read_image
+from scgen.scenes.spec import SceneSpec
 
 POSENET_SKIPS = {"depth", "records", "models_eval", "metadata.csv"}  # what posenet never opens
 LABELS_FOR_TRAINING = {"xyz", "mask", "mask_visib"}  # what posenet reads of the train split alone
@@ -65,7 +66,7 @@ def make_twin(data: Path, out: Path, splits: list[str], for_training: bool) -> i
     for path in tqdm(records, desc="jpeg twin", unit="img"):
         record = json.loads(path.read_text())
         split, sid = record["split"], record["sample_id"]
-        quality = record["spec"]["imaging"]["jpeg_quality"]
+        quality = drawn_jpeg_quality(SceneSpec.from_dict(record["spec"]))
         image = read_image(layout.rgb(split, sid))  # OpenCV's channel order; encode_rgb takes RGB
         rgb = image[..., ::-1] if image.ndim == 3 else image
         target = twin.rgb(split, sid, "jpg")

@@ -13,6 +13,7 @@ import click
 
 from scgen.dataset.export import FORMATS as EXPORT_FORMATS
 from scgen.dataset.export.output import IMAGE_MODES
+from scgen.dataset.layout import RGB_FORMATS
 from scgen.errors import ScgenError
 from scgen.scenes.camera_config import CAMERA_PRESETS
 from scgen.scenes.factors import FACTOR_GROUPS
@@ -125,7 +126,7 @@ def main() -> None:
 @click.option("--ray-address", default=None, help="Ray cluster address (default: start a local Ray).")
 @click.option(
     "--rgb-format",
-    type=click.Choice(["auto", "png", "jpg"]),
+    type=click.Choice(RGB_FORMATS),
     default="auto",
     show_default=True,
     help="auto: JPEG at the camera's drawn quality where the camera has a sensor model (a twelfth of "

@@ -18,6 +18,8 @@ MANIFEST = "scgen.json"
 FORMAT = "scgen-bop/2"
 CHUNK = 1000  # samples per BOP scene folder: scene_id = sample_id // CHUNK; im_id = sample_id
 OBJ_ID = 1  # the target's BOP object id
+# --rgb-format: an rgb/ file extension, or auto (the camera's: scgen.dataset.writer.rgb_format_for)
+RGB_FORMATS = ("auto", "png", "jpg")
 TARGET_INSTANCE = 0  # the target is the only annotated instance of each image
 
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from scgen.annotate import Annotation
 from scgen.annotate.annotate import full_projection
-from scgen.dataset.layout import CHUNK, OBJ_ID, Layout, dumps
+from scgen.dataset.layout import CHUNK, OBJ_ID, RGB_FORMATS, Layout, dumps
 from scgen.errors import ScgenError
 from scgen.io import bop
 from scgen.io.atomic import atomic_write_bytes, atomic_write_text
@@ -50,9 +50,6 @@ METADATA_COLUMNS = (
     "vignetting", "chromatic_px", "flare", "saturated",
     "finish", "earth_lat_deg", "earth_lon_deg", "sky_ra_deg", "sky_dec_deg",
 )  # fmt: skip
-
-
-RGB_FORMATS = ("auto", "png", "jpg")  # auto: the camera's (rgb_format_for)
 
 
 @dataclass(frozen=True)
@@ -104,6 +101,11 @@ def rgb_format_for(requested: str, camera: dict[str, Any]) -> str:
     return "jpg" if camera["sensor"]["enabled"] and camera["output"]["bits"] == 8 else "png"
 
 
+def drawn_jpeg_quality(spec: SceneSpec) -> int:
+    """The JPEG quality the camera drew for the sample (95 for a spec without imaging)."""
+    return spec.imaging.jpeg_quality if spec.imaging else 95
+
+
 def encode_png(img: np.ndarray) -> bytes:
     """A PNG file of an 8- or 16-bit image (masks, depth, BGR colour)."""
     ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 3])
@@ -133,8 +135,7 @@ def write_sample(
     }
     for p in paths.values():
         p.parent.mkdir(parents=True, exist_ok=True)
-    quality = spec.imaging.jpeg_quality if spec.imaging else 95
-    atomic_write_bytes(paths["rgb"], encode_rgb(buffers.rgb, opts.rgb_format, quality))
+    atomic_write_bytes(paths["rgb"], encode_rgb(buffers.rgb, opts.rgb_format, drawn_jpeg_quality(spec)))
     atomic_write_bytes(paths["mask"], encode_png(ann.mask.astype(np.uint8) * 255))
     atomic_write_bytes(paths["mask_visib"], encode_png(ann.mask_visib.astype(np.uint8) * 255))
     xyz_box = None
