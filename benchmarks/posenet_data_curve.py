@@ -105,7 +105,7 @@ def plot(path: Path, points: list[dict[str, Any]], test_n: int, steps: int) -> N
     ax.text(left, CHANCE_RE_DEG, f" a random rotation: {CHANCE_RE_DEG:.0f} deg", color="tab:red", va="bottom",
             alpha=0.8)  # fmt: skip
     ax.axvline(PAPER_TRAIN_IMAGES, color="grey", ls="--")
-    ax.text(PAPER_TRAIN_IMAGES, ax.get_ylim()[1] * 0.95, " paper: 35,000", color="grey", va="top")
+    ax.text(PAPER_TRAIN_IMAGES, ax.get_ylim()[1] * 0.95, "paper: 35,000 ", color="grey", va="top", ha="right")
     ax2 = ax.twinx()
     ax2.plot(x, [100 * p["test"]["add_0.1d"] for p in points], "s-", color="tab:blue", label="ADD@0.1d")
     ax2.set_ylabel("test ADD@0.1d (%)", color="tab:blue")
