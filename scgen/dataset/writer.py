@@ -52,6 +52,9 @@ METADATA_COLUMNS = (
 )  # fmt: skip
 
 
+UNDRAWN_JPEG_QUALITY = 95  # a JPEG's quality where the camera drew none (a spec without imaging)
+
+
 @dataclass(frozen=True)
 class WriteOptions:
     rgb_format: str = "auto"  # auto, png (lossless) or jpg (at the camera's drawn jpeg_quality)
@@ -102,8 +105,8 @@ def rgb_format_for(requested: str, camera: dict[str, Any]) -> str:
 
 
 def drawn_jpeg_quality(spec: SceneSpec) -> int:
-    """The JPEG quality the camera drew for the sample (95 for a spec without imaging)."""
-    return spec.imaging.jpeg_quality if spec.imaging else 95
+    """The JPEG quality the camera drew for the sample (UNDRAWN_JPEG_QUALITY for a spec without imaging)."""
+    return spec.imaging.jpeg_quality if spec.imaging else UNDRAWN_JPEG_QUALITY
 
 
 def encode_png(img: np.ndarray) -> bytes:
@@ -113,7 +116,7 @@ def encode_png(img: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
-def encode_rgb(image: np.ndarray, fmt: str, jpeg_quality: int = 95) -> bytes:
+def encode_rgb(image: np.ndarray, fmt: str, jpeg_quality: int = UNDRAWN_JPEG_QUALITY) -> bytes:
     """The recorded image's file: RGB (H x W x 3) or one channel (H x W), 8 or 16 bits (PNG only)."""
     bgr = image[..., ::-1] if image.ndim == 3 else image
     if fmt == "jpg":
