@@ -83,7 +83,7 @@ class OutputSettings:
     mono: bool = False  # one-channel images (luminance), as SPEED/SPEED+
     bits: int = 8  # 8 or 16 (PNG only)
     curve: str = "srgb"  # srgb | linear
-    jpeg_quality: tuple[int, int] = (85, 95)  # with --rgb-format jpg, drawn per image
+    jpeg_quality: tuple[int, int] = (85, 95)  # drawn per image, for JPEG files (--rgb-format auto's or jpg)
 
 
 SECTIONS = {"exposure": ExposureSettings, "optics": OpticsSettings, "glare": GlareSettings,
