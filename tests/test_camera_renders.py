@@ -4,7 +4,6 @@ and a distorted, monochrome SPEED+ camera keeps every label exact through its le
 from __future__ import annotations
 
 import csv
-import hashlib
 import json
 from pathlib import Path
 
@@ -27,9 +26,41 @@ from scgen.run.runner import RenderJob, run_render
 from scgen.scenes.camera_config import camera_preset
 from scgen.scenes.spec import CameraSpec
 
-BEFORE = Path(__file__).parent / "data" / "rgb_before_camera_stage.json"
+BEFORE = Path(__file__).parent / "data" / "rgb_before_camera_stage.json"  # its images: BEFORE's folder
 # the sky and finish as they were when BEFORE was recorded (procedural Earth and stars, CAD finishes)
 AS_BEFORE = {"background": {"earth_map": "procedural", "stars": "procedural"}, "finish": {"mode": "nominal"}}
+# What rendered floats may move between x86-64 CPU families (Embree's and Dr.Jit's kernels differ by ISA: FMA,
+# packet width, rsqrt approximations). Widespread last-bit rounding moves many pixels by a code or two: the
+# mean bound. A ray that lands on the other side of an edge, or a sampling decision that flips, moves one of
+# draft quality's 4 samples, up to 64 codes in that pixel alone: the count bound (20 of 6,912 pixels; a
+# float-level change of the shadow rays' ends once moved 8 pixels by at most 28 codes). Either bound
+# refuses what the camera stage could get wrong: a 1/3-stop exposure, sigma-1 noise, a one-pixel shift,
+# a 5 % gain (test_the_render_tolerance_refuses_what_a_camera_could_change).
+MEAN_ABS_DN = 0.2
+FAR_DN, FAR_SHARE = 2, 0.003
+
+
+def render_mismatch(image: np.ndarray, reference: np.ndarray) -> str | None:
+    """Why `image` is not `reference` up to cross-CPU float noise (see MEAN_ABS_DN), or None."""
+    if image.shape != reference.shape:
+        return f"shape {image.shape}, not {reference.shape}"
+    diff = np.abs(image.astype(np.int16) - reference.astype(np.int16))
+    far = float((diff.max(axis=-1) > FAR_DN).mean())
+    if diff.mean() > MEAN_ABS_DN or far > FAR_SHARE:
+        return f"mean |diff| {diff.mean():.3f} DN, {far:.2%} of pixels off by more than {FAR_DN} DN"
+    return None
+
+
+def _before_images(backend: str) -> dict[int, tuple[str, np.ndarray | None]]:
+    """BEFORE's samples of `backend`: index -> (background kind, the recorded RGB image or None)."""
+    entries = json.loads(BEFORE.read_text())["samples"][backend]
+    folder = BEFORE.with_suffix("")
+    return {
+        int(index): (old["background"], old["image"] and cv2.imread(str(folder / old["image"]))[..., ::-1])
+        for index, old in entries.items()
+    }
+
+
 LABEL_DIRS = ("mask", "mask_visib", "xyz", "depth")
 
 
@@ -47,15 +78,39 @@ def _metadata(root: Path) -> list[dict[str, str]]:
 
 @pytest.mark.parametrize("backend", ["mitsuba", "blender"])
 def test_ideal_camera_reproduces_the_images_from_before_the_stage(backend: str):
-    """Byte for byte, except `complex` backgrounds, whose sun glare became the stage's flare."""
-    before = json.loads(BEFORE.read_text())["samples"][backend]
+    """Up to cross-CPU float noise, except `complex` backgrounds, whose sun glare became the stage's flare."""
+    before = _before_images(backend)
     with Generator.load(seed=5, resolution=(96, 72), backend=backend, quality="draft", camera="ideal",
                         overrides=AS_BEFORE) as gen:  # fmt: skip
-        for index, old in before.items():
-            sample = gen.sample(int(index))
-            assert sample.spec.background.kind == old["background"]
-            if old["background"] != "complex":
-                assert hashlib.sha256(sample.buffers.rgb.tobytes()).hexdigest() == old["rgb_sha256"], index
+        for index, (background, image) in before.items():
+            sample = gen.sample(index)
+            assert sample.spec.background.kind == background
+            if background != "complex":
+                assert render_mismatch(sample.buffers.rgb, image) is None, (index, render_mismatch(
+                    sample.buffers.rgb, image))  # fmt: skip
+
+
+def test_the_render_tolerance_refuses_what_a_camera_could_change():
+    """The bounds admit a few pixels flipped by a whole sample, and refuse each change the camera stage could
+    make, on every stored image (the dark `clean` one, 1 % lit, is the hardest to tell)."""
+    rng = np.random.default_rng(0)
+    for backend in ("mitsuba", "blender"):
+        for index, (_, image) in _before_images(backend).items():
+            if image is None:
+                continue
+            linear = (image / 255.0) ** 2.2
+            flipped = image.copy()
+            flipped.reshape(-1, 3)[rng.choice(image.shape[0] * image.shape[1], 20, replace=False)] ^= 64
+            assert render_mismatch(flipped, image) is None, (backend, index)
+            changed = {
+                "1/3 stop": 255 * np.clip(linear * 2 ** (1 / 3), 0, 1) ** (1 / 2.2),
+                "noise": image + rng.normal(0.0, 1.0, image.shape),
+                "shift": np.roll(image, 1, axis=1),
+                "gain": image * 1.05,
+            }
+            for what, other in changed.items():
+                other = np.clip(np.round(other), 0, 255).astype(np.uint8)
+                assert render_mismatch(other, image) is not None, (backend, index, what)
 
 
 def test_labels_are_byte_identical_whatever_the_camera(tmp_path: Path):
