@@ -6,7 +6,7 @@ A config file (YAML or TOML) may name a base `preset` (paper or smoke) and overr
     variant: gap-gdrnet
     model: {head_channels: 32}
     data: {workers: 2, bg_prob: 0.0}
-    optim: {epochs: 20, lr: 1.0e-3}
+    optim: {epochs: 20, lr: 1e-3}
 
 `preset`, `variant` and `model` are the arguments of `posenet.models.create_model(variant, preset,
 **model)`: the variant fixes the modules (ggca, mecs, pgsa), `model` overrides any ModelConfig field of
@@ -31,8 +31,11 @@ from posenet.amp import AMP_MODES
 from posenet.errors import PosenetError
 from posenet.models import PRESETS, ModelConfig
 from posenet.models.backbone import IMAGENET, PACKAGE
+from scgen.io import NUMBER_FORM, load_yaml
 
 AUGMENTS = ("paper", "spnv2", "gdrnet-occlusion")  # data.augment: posenet.data.photometric's chains
+# what a value of each field type looks like in a config file, for the message of a wrongly typed one
+EXPECTED_FORM = {float: NUMBER_FORM, int: "a whole number such as 8", bool: "true or false", str: "a string"}
 
 
 @dataclass
@@ -199,7 +202,7 @@ def read_config_file(path: Path) -> dict[str, Any]:
         raise PosenetError(f"config {str(path)!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
     try:
         text = path.read_text()
-        data = yaml.safe_load(text) if path.suffix.lower() in (".yaml", ".yml") else tomllib.loads(text)
+        data = load_yaml(text) if path.suffix.lower() in (".yaml", ".yml") else tomllib.loads(text)
     except (yaml.YAMLError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise PosenetError(f"cannot parse config {path}: {str(exc).splitlines()[0]}") from exc
     if not isinstance(data, dict):
@@ -222,15 +225,22 @@ def override_fields(section: Any, values: Any, name: str) -> Any:
             out[key] = value
             continue
         if isinstance(default, tuple):
-            if not isinstance(value, (list, tuple)) or len(value) != len(default):
-                raise PosenetError(f"config '{name}.{key}' must be a list of {len(default)} numbers")
+            numbers = isinstance(value, (list, tuple)) and all(_is_number(v) for v in value)
+            if not numbers or len(value) != len(default):
+                form = f"a list of {len(default)} numbers such as [{', '.join(map(str, default))}]"
+                raise PosenetError(f"config '{name}.{key}' must be {form}, got {value!r}")
             value = tuple(float(v) for v in value)
-        elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        elif isinstance(default, float) and _is_number(value):
             value = float(value)
         if type(value) is not type(default):
-            raise PosenetError(f"config '{name}.{key}' must be {type(default).__name__}, got {value!r}")
+            expected = EXPECTED_FORM.get(type(default), type(default).__name__)
+            raise PosenetError(f"config '{name}.{key}' must be {expected}, got {value!r}")
         out[key] = value
     return dataclasses.replace(section, **out)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _validate(cfg: TrainConfig) -> None:

@@ -67,7 +67,10 @@ def test_every_factor_is_labelled(spacecraft):
         ({"distance": {"range_m": [2.0, 1.0]}}, "distance.range_m"),
         ({"illumination": {"probs": {"weak": 0.5, "normal": 0.1, "strong": 0.1}}}, "sum to 1"),
         ({"camera": {"width": 0}}, "camera.width"),
-        ({"distance": {"min_px": "abc"}}, "'distance.min_px' must be a number, got 'abc'"),
+        (
+            {"distance": {"min_px": "abc"}},
+            "'distance.min_px' must be a number such as 0.001 or 1e-3, got 'abc'",
+        ),
         ({"camera": {"cx": "abc"}}, "camera.cx must be a number"),
         ({"illumination": {"probs": {"weak": "x"}}}, "'illumination.probs' must map"),
         ({"shadow": {"coverage": 0.3}}, "'shadow.coverage' must be a list"),

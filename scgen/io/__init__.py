@@ -3,8 +3,9 @@ reads scgen datasets through (tests/test_layering.py holds it to that).
 
 `bop` (the BOP format: file names, millimetres, the JSON entries), `atomic` (writes that are whole or
 absent), `exr` (xyz maps in OpenEXR), `image_file` (decoding images, and why one cannot be read),
-`buffers` (what a renderer hands to annotation and the writer) and `parent_watch` (worker pools that end
-with their parent). The names below are posenet's interface.
+`buffers` (what a renderer hands to annotation and the writer), `yaml_file` (YAML configs with YAML
+1.2's floats, 1e-3 included) and `parent_watch` (worker pools that end with their parent). The names
+below are posenet's interface.
 """
 
 from scgen.errors import ScgenError
@@ -13,13 +14,16 @@ from scgen.io.atomic import atomic_write_bytes, atomic_write_text
 from scgen.io.bop import NOT_A_FOLDER, not_a_dataset
 from scgen.io.exr import read_xyz_exr
 from scgen.io.image_file import read_image, why_unreadable
+from scgen.io.yaml_file import NUMBER_FORM, load_yaml
 
 __all__ = [
     "NOT_A_FOLDER",
+    "NUMBER_FORM",
     "ScgenError",
     "atomic_write_bytes",
     "atomic_write_text",
     "bop",
+    "load_yaml",
     "not_a_dataset",
     "read_image",
     "read_xyz_exr",

@@ -16,6 +16,7 @@ from typing import Any
 import yaml
 
 from scgen.errors import ScgenError
+from scgen.io.yaml_file import NUMBER_FORM, load_yaml
 from scgen.scenes.attitude import check_pose
 from scgen.scenes.camera_config import DEFAULT_CAMERA, camera_preset, check_camera, scale_pixel_sizes
 from scgen.scenes.checks import check_prob, check_range, is_number
@@ -143,7 +144,7 @@ def _check_type(name: str, default: Any, value: Any) -> None:
     """A value must have its default's kind (number, list, flag); a None default takes any of them."""
     if default is None:
         return
-    kinds = ((bool, "true or false"), (list, "a list"), ((int, float), "a number"), (str, "a string"))
+    kinds = ((bool, "true or false"), (list, "a list"), ((int, float), NUMBER_FORM), (str, "a string"))
     for kind, label in kinds:
         if isinstance(default, kind):
             ok = (
@@ -221,7 +222,7 @@ def read_config_file(path: Path) -> dict[str, Any]:
     text = path.read_text()
     try:
         if path.suffix.lower() in (".yaml", ".yml"):
-            data = yaml.safe_load(text) or {}
+            data = load_yaml(text) or {}
         elif path.suffix.lower() == ".json":
             data = json.loads(text)
         else:
