@@ -15,6 +15,7 @@ import importlib
 import logging
 from pathlib import Path
 from typing import NamedTuple
+from urllib.parse import urlparse
 
 import timm
 import torch
@@ -113,6 +114,39 @@ def open_residual_init(name: str) -> dict[str, object]:
     if name.startswith("convnext"):
         return {"ls_init_value": 1.0}
     return {}
+
+
+# the files timm's Hugging Face loader takes, safetensors first (timm.models._hub.load_state_dict_from_hf)
+HF_WEIGHT_FILES = ("model.safetensors", "pytorch_model.safetensors", "pytorch_model.bin")
+
+
+class TimmWeights(NamedTuple):
+    """Where pretrained 'imagenet' gets a backbone's weights: the file on this machine, if cached, and the
+    address timm downloads it from otherwise (the Hugging Face hub's endpoint, or the weights' URL)."""
+
+    cached: Path | None
+    source: str
+
+
+def timm_weights(name: str) -> TimmWeights:
+    """timm's ImageNet weights of `name` as this machine has them: looks in the Hugging Face hub cache and
+    torch hub's checkpoints (the two places timm downloads to) and sends no request."""
+    cfg = timm.models.get_pretrained_cfg(name)
+    if cfg is None or not (cfg.hf_hub_id or cfg.url):
+        raise PosenetError(f"timm has no ImageNet weights for backbone {name!r}")
+    if cfg.hf_hub_id:
+        from huggingface_hub import constants, try_to_load_from_cache
+
+        files = (cfg.hf_hub_filename,) if cfg.hf_hub_filename else HF_WEIGHT_FILES
+        for file in files:
+            hit = try_to_load_from_cache(cfg.hf_hub_id, file)
+            if isinstance(hit, str):
+                return TimmWeights(Path(hit), constants.ENDPOINT)
+    if cfg.url:
+        path = Path(torch.hub.get_dir()) / "checkpoints" / Path(urlparse(cfg.url).path).name
+        if path.is_file():
+            return TimmWeights(path, cfg.url)
+    return TimmWeights(None, constants.ENDPOINT if cfg.hf_hub_id else cfg.url)
 
 
 def _downloaded_weights(name: str) -> dict[str, Tensor]:
