@@ -319,3 +319,15 @@ def test_validate_names_an_xyz_map_non_zero_outside_mask_visib(annotated: Path, 
     message = f"FAIL {scene} image 4: instance 1: xyz map non-zero at 3 pixels outside mask_visib"
     assert message in result.output
     assert "1 problem(s) in 4 samples" in result.output
+
+
+def test_validate_says_a_missing_scene_gt_info_is_missing(annotated: Path, tmp_path: Path):
+    """Named once, as missing, not as 'has 0 of N entries' for each of its images."""
+    root = tmp_path / "no_info"
+    shutil.copytree(annotated, root)
+    missing = bop.scene_file(root / SPLIT / "000001", "scene_gt_info")
+    missing.unlink()
+    result = run("validate", str(root))
+    assert result.exit_code == 1
+    assert f"FAIL cannot read {missing}: no such file" in result.output
+    assert result.output.count("FAIL") == 1 and "entries" not in result.output, result.output

@@ -293,9 +293,13 @@ def validate_bop_dataset(root: str | Path, progress: bool = True) -> tuple[list[
     problems: list[str] = []
     for image in tqdm(data.images, desc="validate", unit="img", disable=not progress):
         scene = data.scene(image)
-        if scene not in infos:
-            infos[scene] = read_scene_files(scene)[0].get("scene_gt_info")
-        entries = (infos[scene] or {}).get(str(image.im_id))
+        if scene not in infos:  # a file that cannot be read (a missing one too) is named once per scene
+            files, unreadable = read_scene_files(scene)
+            infos[scene] = files.get("scene_gt_info")
+            problems += unreadable
+        if infos[scene] is None:
+            continue
+        entries = infos[scene].get(str(image.im_id))
         if entries is None or len(entries) != len(image.instances):
             found = [] if entries is None else entries
             problems.append(f"{scene} image {image.im_id}: scene_gt_info.json has {len(found)} of "

@@ -226,9 +226,11 @@ def not_a_dataset(root: str | Path, why: str) -> str:
 
 
 def read_json(path: Path) -> Any:
-    """A JSON file of the dataset, or a one-line ScgenError naming it."""
+    """A JSON file of the dataset, or a one-line ScgenError naming it (and that it is missing, if it is)."""
     try:
         return json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ScgenError(f"cannot read {path}: no such file") from None
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ScgenError(f"cannot read {path}: {exc}") from exc
 
