@@ -240,7 +240,7 @@ def sky() -> Finding:
 
 
 def disk(out: Path) -> Finding:
-    from scgen.run.runner import existing_parent
+    from scgen.io.output_path import existing_parent
 
     folder = existing_parent(out)
     free = shutil.disk_usage(folder).free

@@ -4,8 +4,8 @@ reads scgen datasets through (tests/test_layering.py holds it to that).
 `bop` (the BOP format: file names, millimetres, the JSON entries), `atomic` (writes that are whole or
 absent), `exr` (xyz maps in OpenEXR), `image_file` (decoding images, and why one cannot be read),
 `buffers` (what a renderer hands to annotation and the writer), `yaml_file` (YAML configs with YAML
-1.2's floats, 1e-3 included) and `parent_watch` (worker pools that end with their parent). The names
-below are posenet's interface.
+1.2's floats, 1e-3 included), `output_path` (the one rule for an output path) and `parent_watch` (worker
+pools that end with their parent). The names below are posenet's interface.
 """
 
 from scgen.errors import ScgenError
@@ -14,6 +14,7 @@ from scgen.io.atomic import atomic_write_bytes, atomic_write_text
 from scgen.io.bop import NOT_A_FOLDER, not_a_dataset
 from scgen.io.exr import read_xyz_exr
 from scgen.io.image_file import read_image, why_unreadable
+from scgen.io.output_path import check_output, existing_parent, make_output_folder
 from scgen.io.yaml_file import NUMBER_FORM, load_yaml
 
 __all__ = [
@@ -23,7 +24,10 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
     "bop",
+    "check_output",
+    "existing_parent",
     "load_yaml",
+    "make_output_folder",
     "not_a_dataset",
     "read_image",
     "read_xyz_exr",

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -28,6 +27,7 @@ from scgen.errors import ScgenError
 from scgen.generator import Generator
 from scgen.io.atomic import atomic_write_text, remove_stale_temporaries
 from scgen.io.bop import read_json
+from scgen.io.output_path import check_output
 from scgen.io.parent_watch import spawn_pool
 from scgen.render.base import check_backend, renderer_threads
 from scgen.render.conventions import check_quality
@@ -91,17 +91,7 @@ def validate_job(job: RenderJob) -> None:
         raise ScgenError(f"output {job.out} exists and is not a directory")
     if job.out.is_dir() and any(job.out.iterdir()) and not (job.out / MANIFEST).exists():
         raise ScgenError(f"output {job.out} is a non-empty folder that is not an scgen dataset")
-    parent = job.out if job.out.exists() else existing_parent(job.out)
-    if not os.access(parent, os.W_OK):
-        raise ScgenError(f"output {job.out} is not writable")
-
-
-def existing_parent(p: Path) -> Path:
-    """`p`, or its nearest ancestor that exists (absolute)."""
-    p = p.absolute()
-    while not p.exists():
-        p = p.parent
-    return p
+    check_output(job.out, folder=True, overwrite=True)
 
 
 def make_plan(job: RenderJob) -> Plan:
