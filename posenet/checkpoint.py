@@ -22,8 +22,17 @@ def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def load_checkpoint(path: Path) -> dict[str, Any]:
-    """A posenet checkpoint on the CPU; anything else is a one-line error."""
+KINDS = {"pose": "posenet train's", "detector": "posenet train-detector's"}
+
+
+def checkpoint_kind(state: dict[str, Any]) -> str:
+    """'detector' (an FCOS run: its model_config names an arch) or 'pose'."""
+    return "detector" if "arch" in state["model_config"] else "pose"
+
+
+def load_checkpoint(path: Path, kind: str | None = None) -> dict[str, Any]:
+    """A posenet checkpoint on the CPU (of `kind`, pose or detector, when given); anything else is a
+    one-line error naming the file."""
     if not Path(path).is_file():
         raise PosenetError(f"checkpoint not found: {path}")
     try:
@@ -32,6 +41,11 @@ def load_checkpoint(path: Path) -> dict[str, Any]:
         raise PosenetError(f"{path} is not a readable checkpoint: {str(exc).splitlines()[0]}") from exc
     if not isinstance(state, dict) or any(k not in state for k in REQUIRED):
         raise PosenetError(f"{path} is not a posenet checkpoint (needs {', '.join(REQUIRED)})")
+    if kind is not None and checkpoint_kind(state) != kind:
+        found = checkpoint_kind(state)
+        raise PosenetError(
+            f"{path} is a {found} checkpoint ({KINDS[found]}), not a {kind} one ({KINDS[kind]})"
+        )
     return state
 
 

@@ -219,6 +219,9 @@ def override_fields(section: Any, values: Any, name: str) -> Any:
         if key not in fields:
             raise PosenetError(f"unknown config key '{name}.{key}'")
         default = getattr(section, key)
+        if value is None and "None" in str(fields[key].type):  # an optional field set to null
+            out[key] = None
+            continue
         if default is None:  # an optional path (e.g. a weights file): a string or null
             if value is not None and not isinstance(value, str):
                 raise PosenetError(f"config '{name}.{key}' must be a path or null, got {value!r}")

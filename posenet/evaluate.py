@@ -81,7 +81,7 @@ class EvalResult:
 
 def load_model(ckpt: Path, device: torch.device) -> tuple[PoseNet, dict[str, Any]]:
     """The network of a checkpoint, in eval mode on `device`, and the checkpoint itself."""
-    state = load_checkpoint(ckpt)
+    state = load_checkpoint(ckpt, kind="pose")
     model = create_model(**state["model_config"])
     try:
         model.load_state_dict(state["model"])
@@ -251,15 +251,16 @@ def evaluate_pnp(
 
 def bop_results_csv(records: list[dict[str, Any]]) -> str:
     """The records as a BOP19 results file: `scene_id,im_id,obj_id,score,R,t,time`, R row-major and t in
-    mm, space-separated; time = the image's seconds (the same for each of its estimates); score 1.0 (the
-    network gives no confidence)."""
+    mm, space-separated; time = the image's seconds (the same for each of its estimates); score the
+    record's `score` (posenet predict's pose confidence), else 1.0."""
     lines = ["scene_id,im_id,obj_id,score,R,t,time"]
     for r in (
         r for r in records if r["R"] is not None
     ):  # no estimate (missed, PnP failed): BOP counts it wrong
         R = " ".join(repr(float(v)) for v in r["R"])
         t = " ".join(repr(float(v) * bop.MM_PER_M) for v in r["t"])
-        lines.append(f"{r['scene_id']},{r['im_id']},{r['obj_id']},1.0,{R},{t},{r['time_s']!r}")
+        score = float(r.get("score", 1.0))
+        lines.append(f"{r['scene_id']},{r['im_id']},{r['obj_id']},{score!r},{R},{t},{r['time_s']!r}")
     return "\n".join(lines) + "\n"
 
 

@@ -26,7 +26,6 @@ from posenet.detection.detector import (
     detector_config_from_dict,
     image_groups,
 )
-from posenet.errors import PosenetError
 
 
 @dataclass(frozen=True)
@@ -42,9 +41,7 @@ class Detection:
 
 def load_detector(ckpt: Path, device: torch.device) -> tuple[FCOS, dict[str, Any]]:
     """The network of a detector checkpoint, in eval mode on `device`, and the checkpoint itself."""
-    state = load_checkpoint(ckpt)
-    if "arch" not in state["model_config"]:
-        raise PosenetError(f"{ckpt} is not a detector checkpoint (it has no model_config.arch)")
+    state = load_checkpoint(ckpt, kind="detector")
     model = build_detector(state["model_config"])
     model.load_state_dict(state["model"])
     return model.to(device).eval(), state

@@ -36,6 +36,7 @@ ALIASES = {"smoke": "cpu"}
 ARCHS = ("fcos-timm-fpn", "fcos-resnet50-fpn")
 POSE_ONLY_OPTIM = ("amp", "grad_centralization")  # OptimConfig fields only pose training reads
 STRIDES = (2, 4, 8, 16, 32)  # the backbone strides fcos-timm-fpn may predict at (min_stride ... 32)
+FCOS_NORM_GROUPS = 32  # the GroupNorm groups of torchvision's FCOSHead: fpn_channels must divide by them
 
 
 @dataclass
@@ -127,6 +128,10 @@ def detector_config_from_dict(raw: dict[str, Any]) -> DetectorConfig:
     for name, value in sizes.items():
         if value < 1:
             raise PosenetError(f"detector {name} must be >= 1, got {value}")
+    if cfg.fpn_channels % FCOS_NORM_GROUPS:  # torchvision's FCOS head normalises in groups of 32
+        raise PosenetError(
+            f"detector fpn_channels must be a multiple of {FCOS_NORM_GROUPS}, got {cfg.fpn_channels}"
+        )
     if cfg.min_stride not in STRIDES:
         raise PosenetError(f"detector min_stride must be one of {list(STRIDES)}, got {cfg.min_stride}")
     return cfg
