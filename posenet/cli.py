@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 import cv2
 import torch
+from tqdm import tqdm
 
 from posenet.amp import AMP_MODES
 from posenet.bench import PAPER, device_label, format_report, resolve_device, run_bench
@@ -32,11 +33,14 @@ from posenet.evaluate import (
 )
 from posenet.evaluate import by_factor as run_by_factor
 from posenet.models import VARIANTS
+from posenet.predict.inputs import predict_inputs
+from posenet.predict.run import FORMATS as PREDICT_FORMATS
+from posenet.predict.run import run_predict
 from posenet.ransac import PNP_LABELS, PNP_METHODS
 from posenet.train import train as run_train
 from posenet.viz import heatmap_panel, overlay_panel
-from scgen.cli import one_line_errors
-from scgen.io import ScgenError, atomic_write_text
+from scgen.cli import one_line_errors, preset_intrinsics
+from scgen.io import ScgenError, atomic_write_text, check_output, make_output_folder
 
 PATH = click.Path(path_type=Path)
 
@@ -343,6 +347,81 @@ def viz(data: Path, ckpts: tuple[Path, ...], samples: str, split: str, out: Path
                         ("features.png", heatmap_panel(data, split, list(ckpts), ids))):  # fmt: skip
         cv2.imwrite(str(out / name), panel)
         click.echo(f"wrote {out / name}")
+
+
+@main.command()
+@click.argument("source", required=False)
+@click.option("--ckpt", type=PATH, required=True, help="Pose checkpoint (last.pt of posenet train).")
+@click.option("--detector", type=PATH, default=None, help="Detector checkpoint (best.pt of train-detector).")
+@click.option(
+    "--camera",
+    default=None,
+    help="The camera that took SOURCE: fx,fy,cx,cy[,k1,k2,p1,p2,k3] (pixels, OpenCV distortion), a SPEED+ "
+    "or BOP camera.json, a scgen preset name (default, speedplus, ...), or 'training' (the checkpoint's).",
+)
+@click.option(
+    "--data", type=PATH, default=None, help="Predict a dataset split instead of SOURCE (its cameras)."
+)
+@click.option("--split", default="test", show_default=True, help="The split of --data.")
+@click.option("--box", default=None, help="x,y,w,h: one box for every image, instead of the detector.")
+@click.option(
+    "--boxes",
+    type=PATH,
+    default=None,
+    help="BOP detection JSON (posenet boxes): keyed by (scene_id, im_id) with --data, else (0, input index).",
+)
+@click.option(
+    "--out", type=PATH, required=True, help="Folder for predictions.jsonl, overlays and --format files."
+)
+@click.option(
+    "--format",
+    "formats",
+    multiple=True,
+    type=click.Choice(PREDICT_FORMATS),
+    help="Also write BOP19 results.csv or a SPEED+/Kelvins submission.csv (repeatable).",
+)
+@click.option("--no-vis", is_flag=True, help="No overlays (images, video, sheet.jpg).")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--overwrite", is_flag=True, help="Write into an existing, non-empty --out.")
+@one_line_errors(PosenetError, ScgenError)
+def predict(
+    source: str | None,
+    ckpt: Path,
+    detector: Path | None,
+    camera: str | None,
+    data: Path | None,
+    split: str,
+    box: str | None,
+    boxes: Path | None,
+    out: Path,
+    formats: tuple[str, ...],
+    no_vis: bool,
+    device: str,
+    overwrite: bool,
+) -> None:
+    """Poses from images a user brings: SOURCE is an image, a folder, a glob or a video (or --data DIR
+    --split S). Each image is warped into the camera the network was trained with (lens, focal length and
+    size: docs/posenet.md), boxed by --detector (or --box / --boxes; with --data and neither, the
+    ground-truth boxes, as posenet eval), cropped, and its pose decoded in the user's camera."""
+    inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
+                            preset_intrinsics)  # fmt: skip
+    check_output(out, folder=True, overwrite=overwrite)
+    make_output_folder(out)
+    with tqdm(total=inputs.total, desc="predict", unit="img", dynamic_ncols=True) as bar:
+        run = run_predict(inputs.predictor, inputs.frames, inputs.total, out, inputs.camera, inputs.box_for,
+                          vis=not no_vis, formats=formats, video_fps=inputs.video_fps, progress=bar.update,
+                          warn=tqdm.write)  # fmt: skip
+    posed = sum(r.get("R") is not None for r in run.records)
+    click.echo(f"{len(run.records)} inputs, {posed} poses, {run.failed} unreadable, "
+               f"{len(run.records) / max(run.seconds, 1e-9):.1f} images/s")  # fmt: skip
+    stages = inputs.predictor.timings.mean_ms()
+    click.echo("latency per image (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
+    for path in run.files:
+        click.echo(f"wrote {path}")
+    if run.failed:
+        raise PosenetError(
+            f"{run.failed} of {len(run.records)} inputs could not be read (see {run.files[0]})"
+        )
 
 
 if __name__ == "__main__":  # `python -m posenet.cli`, e.g. under `torchrun -m`

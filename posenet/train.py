@@ -36,6 +36,7 @@ from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.losses import LOSS_TERMS, PmObject, pose_losses
 from posenet.models import PoseNet, create_model
+from posenet.predict.camera import training_camera
 from scgen.io import atomic_write_text
 
 LOG_FILE = "train_log.jsonl"
@@ -415,8 +416,15 @@ def _checkpoint(run: _Run) -> dict[str, Any]:
         "rank_weight_spread": run.weight_spread,
         "amp": run.precision.mode,
         "grad_scaler": run.precision.scaler.state_dict(),
-        "object": {"extent": run.dataset.obj.extent.tolist(), "diameter": run.dataset.obj.diameter},
+        # what `posenet predict` needs without the dataset: the object's mesh and the training camera
+        "object": run.dataset.obj.to_record(),
+        "camera": _camera_record(run.dataset.instances),
     }
+
+
+def _camera_record(instances: list) -> dict[str, Any]:
+    camera, uniform = training_camera([i.K for i in instances], instances[0].image_size)
+    return {**camera.to_dict(), "uniform": uniform}
 
 
 def _open_run_folder(out: Path, cfg: TrainConfig, step: int, stop: int | None) -> RunLog:

@@ -17,6 +17,7 @@ from posenet.data.layout import Instance, scan_split
 from posenet.errors import PosenetError
 from posenet.evaluate import evaluate, load_model
 from posenet.featviz import model_feature_response
+from posenet.predict.overlay import outline
 from scgen.io import bop
 
 GT_COLOUR = (255, 255, 255)  # BGR
@@ -26,15 +27,9 @@ TILE = 256
 
 def silhouette_contours(mesh: trimesh.Trimesh, K: np.ndarray, R: np.ndarray, t: np.ndarray,
                         size: tuple[int, int]) -> list[np.ndarray]:  # fmt: skip
-    """Outer contours of the model projected at pose (R, t): every triangle filled, then traced."""
-    X = mesh.vertices @ R.T + t
-    uv = X @ K.T
-    uv = uv[:, :2] / np.clip(uv[:, 2:3], 1e-6, None)
-    canvas = np.zeros((size[1], size[0]), np.uint8)
-    tris = np.round(uv[mesh.faces] * 8).astype(np.int32)  # 3 bits of sub-pixel precision
-    cv2.fillPoly(canvas, list(tris), 255, shift=3)
-    contours, _ = cv2.findContours(canvas, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    return list(contours)
+    """Outer contours of the model projected at pose (R, t) through the pinhole K."""
+    uv = (mesh.vertices @ R.T + t) @ K.T
+    return outline(uv[:, :2] / np.clip(uv[:, 2:3], 1e-6, None), np.asarray(mesh.faces), size)
 
 
 def _crop_box(inst: Instance, pad: float = 1.4) -> tuple[int, int, int]:

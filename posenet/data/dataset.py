@@ -38,6 +38,30 @@ def region_labels(xyz: np.ndarray, visible: np.ndarray, centres: np.ndarray) -> 
     return labels
 
 
+def roi_image(bgr: np.ndarray, roi: Roi, res: int) -> np.ndarray:
+    """The res x res RoI of a BGR uint8 image as RGB float32 in [0, 1] (training, eval and predict)."""
+    return crop(bgr, roi, res, nearest=False)[..., ::-1].astype(np.float32) / 255.0
+
+
+def image_tensor(img: np.ndarray) -> torch.Tensor:
+    """H x W x 3 -> 3 x H x W, contiguous."""
+    return torch.from_numpy(np.ascontiguousarray(img.transpose(2, 0, 1)))
+
+
+def roi_geometry(
+    roi: Roi, K: np.ndarray, image_size: tuple[int, int], output_res: int
+) -> dict[str, torch.Tensor]:
+    """What the network and pose decoding read of a RoI besides its pixels: roi_coord2d, K, crop_center,
+    box_wh and resize_ratio (the one home of these items' conventions: training, eval and predict)."""
+    return {
+        "roi_coord2d": torch.from_numpy(roi_coord2d(roi, output_res, image_size)),
+        "K": torch.from_numpy(np.asarray(K, np.float64)).float(),
+        "crop_center": torch.from_numpy(roi.center).float(),
+        "box_wh": torch.from_numpy(roi.box_wh).float(),
+        "resize_ratio": torch.tensor(output_res / roi.scale, dtype=torch.float32),
+    }
+
+
 class PoseDataset(Dataset):
     """RoI samples of `instances`. With `train`, items carry targets and are augmented; each sample's
     randomness comes from (seed, epoch, index), the index being an (epoch, index) pair from EpochSampler.
@@ -81,13 +105,9 @@ class PoseDataset(Dataset):
         roi_img, cut = self._roi_image(inst, roi, rng, visib)
         item = {
             "roi_img": roi_img,
-            "roi_coord2d": torch.from_numpy(roi_coord2d(roi, self.output_res, inst.image_size)),
-            "K": torch.from_numpy(inst.K).float(),
+            **roi_geometry(roi, inst.K, inst.image_size, self.output_res),
             "R": torch.from_numpy(inst.R).float(),
             "t": torch.from_numpy(inst.t).float(),
-            "crop_center": torch.from_numpy(roi.center).float(),
-            "box_wh": torch.from_numpy(roi.box_wh).float(),
-            "resize_ratio": torch.tensor(self.output_res / roi.scale, dtype=torch.float32),
             "key": torch.tensor(inst.key),
         }
         if full is not None and visib is not None:
@@ -111,8 +131,7 @@ class PoseDataset(Dataset):
     ) -> tuple[torch.Tensor, augment.Cut | None]:
         """The RoI crop, augmented when `rng` is given (`visib` is the full-resolution visible mask), and
         the foreground truncation's cut (data.truncate_fg), which the targets follow."""
-        bgr = crop(read_bgr(inst.rgb), roi, self.input_res, nearest=False)
-        img = bgr[..., ::-1].astype(np.float32) / 255.0
+        img = roi_image(read_bgr(inst.rgb), roi, self.input_res)
         cut = None
         if rng is not None and visib is not None and rng.random() < self.cfg.bg_prob:
             # keep only the visible target, as GDR-Net does: keeping the full mask would keep the part of
@@ -124,7 +143,7 @@ class PoseDataset(Dataset):
             img = augment.replace_background(img, keep, self._background(rng))
         if rng is not None:
             img = self._photometric(img, inst, roi, rng)
-        return torch.from_numpy(np.ascontiguousarray(img.transpose(2, 0, 1))), cut
+        return image_tensor(img), cut
 
     def _photometric(self, img: np.ndarray, inst: Instance, roi: Roi, rng: np.random.Generator) -> np.ndarray:
         """data.augment's colour chain: the paper's brightness/contrast or GDR-Net's chain with probability

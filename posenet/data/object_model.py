@@ -9,8 +9,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import torch
 import trimesh
 
 from posenet.data.layout import MAKE_ONE
@@ -26,6 +28,7 @@ class ObjectModel:
 
     obj_id: int
     vertices: np.ndarray  # (V, 3)
+    faces: np.ndarray  # (F, 3) triangles of the vertices: predict draws the silhouette from them
     extent: np.ndarray  # (3,) bbox size per axis: xyz maps are normalised as xyz / extent + 0.5
     diameter: float
     fps_points: np.ndarray  # (num_regions, 3) surface-region centres, FPS on the vertices
@@ -38,6 +41,18 @@ class ObjectModel:
     def symmetric(self) -> bool:
         """Whether models_info declares any symmetry (BOP's symmetric objects)."""
         return len(self.symmetries) > 1
+
+    def to_record(self) -> dict[str, Any]:
+        """What a checkpoint keeps of the object (tensors, as torch's safe loader reads them), so a pose
+        can be predicted, scored and drawn without the dataset: object_from_record rebuilds the rest."""
+        return {
+            "obj_id": self.obj_id,
+            "vertices": torch.from_numpy(self.vertices.astype(np.float64)),
+            "faces": torch.from_numpy(self.faces.astype(np.int64)),
+            "extent": self.extent.tolist(),
+            "diameter": self.diameter,
+            "symmetries": torch.from_numpy(self.symmetries.astype(np.float64)),
+        }
 
 
 def farthest_point_sampling(points: np.ndarray, n: int) -> np.ndarray:
@@ -75,14 +90,41 @@ def load_object_model(root: Path, obj_id: int, num_regions: int, num_pm: int) ->
     except (KeyError, TypeError, ValueError) as exc:
         raise PosenetError(f"{info_path}: no valid entry for object {obj_id}") from exc
     mesh = bop.read_model_mesh(root, obj_id)
-    vertices = np.asarray(mesh.vertices)
-    if len(vertices) == 0 or len(mesh.faces) == 0 or mesh.area <= 0:
+    if len(mesh.vertices) == 0 or len(mesh.faces) == 0 or mesh.area <= 0:
         raise PosenetError(f"{ply_path} has no surface (vertices and faces of non-zero area)")
+    diameter = float(info["diameter"]) / bop.MM_PER_M
+    return _object_model(obj_id, mesh, extent, diameter, symmetries, num_regions, num_pm)
+
+
+def object_from_record(record: dict[str, Any], num_regions: int, num_pm: int) -> ObjectModel:
+    """The ObjectModel of ObjectModel.to_record's dict: the same regions and surface points as the
+    dataset's model gave (both are drawn from the mesh with fixed seeds)."""
+    mesh = trimesh.Trimesh(
+        np.asarray(record["vertices"], np.float64), np.asarray(record["faces"], np.int64), process=False
+    )
+    extent = np.asarray(record["extent"], np.float64)
+    symmetries = np.asarray(record["symmetries"], np.float64)
+    return _object_model(
+        int(record["obj_id"]), mesh, extent, float(record["diameter"]), symmetries, num_regions, num_pm
+    )
+
+
+def _object_model(
+    obj_id: int,
+    mesh: trimesh.Trimesh,
+    extent: np.ndarray,
+    diameter: float,
+    symmetries: np.ndarray,
+    num_regions: int,
+    num_pm: int,
+) -> ObjectModel:
+    vertices = np.asarray(mesh.vertices)
     return ObjectModel(
         obj_id=obj_id,
         vertices=vertices,
+        faces=np.asarray(mesh.faces),
         extent=extent,
-        diameter=float(info["diameter"]) / bop.MM_PER_M,
+        diameter=diameter,
         fps_points=farthest_point_sampling(vertices, num_regions),
         pm_points=surface_points(mesh, num_pm),
         symmetries=symmetries,

@@ -241,3 +241,14 @@ def check_camera(cam: dict[str, Any]) -> None:
     check_range("camera.output.jpeg_quality", q, 1)
     if q[1] > 100:
         raise ScgenError(f"camera.output.jpeg_quality must lie in [1, 100], got {q}")
+
+
+def preset_intrinsics(name: str) -> tuple[list[list[float]], list[float], tuple[int, int]]:
+    """(K, OpenCV distortion, (width, height)) of a preset's camera: what a pose predictor needs to read
+    images taken by it (`posenet predict --camera speedplus`)."""
+    cam = camera_preset(name)
+    w, h = int(cam["width"]), int(cam["height"])
+    cx = (w - 1) / 2 if cam["cx"] is None else float(cam["cx"])
+    cy = (h - 1) / 2 if cam["cy"] is None else float(cam["cy"])
+    K = [[float(cam["fx"]), 0.0, cx], [0.0, float(cam["fy"]), cy], [0.0, 0.0, 1.0]]
+    return K, [float(k) for k in cam.get("dist") or []], (w, h)

@@ -1,0 +1,118 @@
+"""Everything `posenet predict` reads, checked before its first output is written: the checkpoints, the
+camera, the inputs and where each image's box comes from. A problem is one PosenetError line."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from posenet.data.boxes import read_boxes, read_misses
+from posenet.errors import PosenetError
+from posenet.predict.camera import Camera, make_camera, parse_inline, read_camera_file
+from posenet.predict.predictor import Box, Predictor
+from posenet.predict.run import MISS
+from posenet.predict.sources import Frame, dataset_frames, read_frames, resolve_source
+
+PresetLookup = Callable[[str], tuple[list[list[float]], list[float], tuple[int, int]]]
+TRAINING = "training"  # --camera training: the checkpoint's own camera
+
+
+@dataclass
+class PredictInputs:
+    predictor: Predictor
+    frames: Iterable[Frame]
+    total: int
+    camera: Camera | None  # None with --data: each frame brings its own
+    box_for: Callable[[Frame, int], Box | str | None]
+    video_fps: float = 0.0
+
+
+def resolve_camera(text: str, training: Camera, presets: PresetLookup) -> Camera:
+    """--camera: 'training', a camera file, a scgen preset name, or inline numbers."""
+    if text == TRAINING:
+        return training
+    if Path(text).is_file():
+        return read_camera_file(Path(text))
+    if text.replace("_", "").isalpha():
+        try:
+            K, dist, size = presets(text)
+        except Exception as exc:  # the preset table's own one-line error
+            raise PosenetError(f"--camera {text!r}: {exc}") from exc
+        return make_camera(np.asarray(K), dist, size)
+    return parse_inline(text)
+
+
+def parse_box(text: str) -> Box:
+    try:
+        x, y, w, h = (float(v) for v in text.split(","))
+    except ValueError as exc:
+        raise PosenetError(f"--box must be x,y,w,h (pixels), got '{text}'") from exc
+    if w <= 0 or h <= 0:
+        raise PosenetError(f"--box width and height must be positive, got '{text}'")
+    return x, y, w, h
+
+
+def predict_inputs(
+    source: str | None,
+    ckpt: Path,
+    detector: Path | None,
+    camera: str | None,
+    data: Path | None,
+    split: str,
+    box: str | None,
+    boxes: Path | None,
+    device: torch.device,
+    presets: PresetLookup,
+) -> PredictInputs:
+    """The checked inputs of one predict run (nothing is written here)."""
+    if (source is None) == (data is None):
+        raise PosenetError("give SOURCE (an image, folder, glob or video) or --data DIR, not both or neither")
+    if box is not None and boxes is not None:
+        raise PosenetError("give --box or --boxes, not both")
+    if data is None and camera is None:
+        raise PosenetError("--camera is required with SOURCE: fx,fy,cx,cy[,dist], a camera.json, a scgen "
+                           "preset name, or 'training' (the checkpoint's own camera)")  # fmt: skip
+    fixed_box = parse_box(box) if box is not None else None
+    predictor = Predictor.load(ckpt, detector, device, data)
+    obj_id = predictor.obj.obj_id
+    if data is not None:
+        if camera is not None:
+            raise PosenetError("--camera is taken from the dataset with --data; leave it out")
+        frames = dataset_frames(data, split, obj_id)
+        user, total, fps, stream = None, len(frames), 0.0, frames
+        keys = [f.key for f in frames if f.key is not None]
+    else:
+        user = resolve_camera(str(camera), predictor.camera, presets)
+        src = resolve_source(str(source))
+        total, fps, stream = len(src), src.fps, read_frames(src)
+        keys = [(0, i) for i in range(total)]
+    stored, misses = _read_box_file(boxes, obj_id, keys) if boxes is not None else ({}, set())
+    if fixed_box is None and boxes is None and detector is None and data is None:
+        raise PosenetError("no box for the images: give --detector, --box x,y,w,h or --boxes FILE")
+
+    def box_for(frame: Frame, index: int) -> Box | str | None:
+        key = frame.key if frame.key is not None else (0, index)
+        if fixed_box is not None:
+            return fixed_box
+        if boxes is not None:
+            return MISS if key in misses else stored[key]
+        if detector is None and frame.box is not None:  # --data without a detector: GT, as posenet eval
+            return frame.box
+        return None
+
+    return PredictInputs(predictor, stream, total, user, box_for, fps)
+
+
+def _read_box_file(path: Path, obj_id: int, keys: list[tuple[int, int]]) -> tuple[dict, set]:
+    """The box file's boxes and misses; every input must have one or the other."""
+    stored, misses = read_boxes(path, obj_id), read_misses(path, obj_id)
+    missing = [k for k in keys if k not in stored and k not in misses]
+    if missing:
+        raise PosenetError(
+            f"box file {path} has no box for {len(missing)} input(s), e.g. (scene, image) {missing[0]}"
+        )
+    return stored, misses

@@ -1,0 +1,94 @@
+"""Drawing a predicted pose on the user's image, in the paper's qualitative style: the model's projected
+silhouette edge, its axes at the predicted pose, and the box; a contact sheet of several."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from posenet.data.object_model import ObjectModel
+from posenet.predict.camera import Camera, project
+from posenet.predict.predictor import Pose
+
+POSE_COLOUR = (60, 220, 60)  # BGR: the silhouette edge
+BOX_COLOUR = (0, 200, 255)
+AXIS_COLOURS = ((0, 0, 255), (0, 255, 0), (255, 0, 0))  # x red, y green, z blue
+WARN_COLOUR = (0, 0, 255)
+AXIS_LENGTH = 0.5  # of the object's diameter
+
+
+def outline(uv: np.ndarray, faces: np.ndarray, size: tuple[int, int]) -> list[np.ndarray]:
+    """Outer contours of a mesh whose vertices project to `uv` (N x 2 pixels): every triangle filled on an
+    image of `size` (width, height), then traced."""
+    canvas = np.zeros((size[1], size[0]), np.uint8)
+    tris = np.round(np.clip(uv, -1e5, 1e5)[faces] * 8).astype(np.int32)  # 3 bits of sub-pixel precision
+    cv2.fillPoly(canvas, list(tris), 255, shift=3)
+    contours, _ = cv2.findContours(canvas, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    return list(contours)
+
+
+def thickness(image: np.ndarray) -> int:
+    return max(1, round(max(image.shape[:2]) / 400))
+
+
+def draw_pose(image: np.ndarray, pose: Pose, obj: ObjectModel, camera: Camera, label: str = "") -> np.ndarray:
+    """A copy of `image` (BGR) with the pose drawn through `camera` (its lens too) and a label line."""
+    out = image.copy() if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    size, lw = (out.shape[1], out.shape[0]), thickness(out)
+    if pose.box is not None:
+        x, y, w, h = pose.box
+        cv2.rectangle(
+            out, (round(x - 0.5), round(y - 0.5)), (round(x + w - 0.5), round(y + h - 0.5)), BOX_COLOUR, lw
+        )
+    if pose.R is not None and pose.t is not None and pose.t[2] > 0:
+        uv = project(obj.vertices, pose.R, pose.t, camera)
+        cv2.drawContours(out, outline(uv, obj.faces, size), -1, POSE_COLOUR, lw, cv2.LINE_AA)
+        ends = np.vstack([np.zeros(3), np.eye(3) * AXIS_LENGTH * obj.diameter])
+        o, *tips = project(ends, pose.R, pose.t, camera)
+        for tip, colour in zip(tips, AXIS_COLOURS, strict=True):
+            cv2.line(out, _pt(o), _pt(tip), colour, lw + 1, cv2.LINE_AA)
+    text = f"{label} score {pose.score:.2f} conf {pose.confidence:.2f}"
+    colour = WARN_COLOUR if pose.flags else (255, 255, 255)
+    if pose.flags:
+        text += " " + ",".join(pose.flags)
+    scale = max(0.4, max(out.shape[:2]) / 1200)
+    cv2.putText(
+        out,
+        text.strip(),
+        (6, round(22 * scale / 0.5)),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        scale,
+        (0, 0, 0),
+        lw + 2,
+        cv2.LINE_AA,
+    )
+    cv2.putText(
+        out,
+        text.strip(),
+        (6, round(22 * scale / 0.5)),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        scale,
+        colour,
+        lw,
+        cv2.LINE_AA,
+    )
+    return out
+
+
+def _pt(p: np.ndarray) -> tuple[int, int]:
+    return int(round(float(np.clip(p[0], -1e5, 1e5)))), int(round(float(np.clip(p[1], -1e5, 1e5))))
+
+
+def contact_sheet(images: list[np.ndarray], columns: int = 4, tile_width: int = 320) -> np.ndarray:
+    """The images side by side, `columns` a row, each scaled to `tile_width` (height by its aspect)."""
+    tiles = [
+        cv2.resize(
+            im, (tile_width, round(im.shape[0] * tile_width / im.shape[1])), interpolation=cv2.INTER_AREA
+        )
+        for im in images
+    ]
+    height = max(t.shape[0] for t in tiles)
+    tiles = [cv2.copyMakeBorder(t, 0, height - t.shape[0], 0, 0, cv2.BORDER_CONSTANT, value=0) for t in tiles]
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % columns)
+    rows = [np.hstack(tiles[i : i + columns]) for i in range(0, len(tiles), columns)]
+    return np.vstack(rows)

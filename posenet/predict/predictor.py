@@ -1,0 +1,246 @@
+"""A pose from an image and its camera: detector (or a given box) -> the training crop -> pose network.
+
+`Predictor.load(ckpt, detector=...)` needs no dataset: a checkpoint carries the object (mesh, extent,
+diameter, symmetries) and the camera it was trained with. `predictor(image, camera)` warps the image into
+that camera (posenet.predict.camera), finds the box, crops it with the code training and `posenet eval`
+use (posenet.data.dataset.roi_image / roi_geometry), runs the network and decodes the pose with
+posenet.geometry.decode_pose, so predict and eval cannot disagree on a convention.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from posenet.checkpoint import load_checkpoint
+from posenet.config import config_from_dict
+from posenet.data.crop import roi_from_box
+from posenet.data.dataset import image_tensor, roi_geometry, roi_image
+from posenet.data.layout import image_size, scan_split
+from posenet.data.object_model import ObjectModel, load_object_model, object_from_record
+from posenet.errors import PosenetError
+from posenet.evaluate import load_model
+from posenet.geometry import decode_pose
+from posenet.losses import mask_probability
+from posenet.predict.camera import (
+    Camera,
+    make_camera,
+    map_box,
+    project,
+    to_training_camera,
+    training_camera,
+)
+from posenet.ransac import MIN_POINTS, correspondences
+
+Box = tuple[float, float, float, float]  # [x, y, w, h]: pixels x .. x + w - 1 (posenet.data.crop)
+LOW_CONFIDENCE = 0.5  # below: the pose is flagged low_confidence
+FLAGS = ("no_detection", "behind_camera", "outside_view", "low_confidence")
+STAGES = ("decode", "detector", "crop", "pose_network", "solve", "drawing")  # timed per image (ms)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """One image's answer. R, t: model to camera (X_cam = R X + t, metres) in the user's camera, None
+    without a detection; box [x, y, w, h] in the user's image; score: the detector's (1 for a given box);
+    confidence: the share of the predicted visible pixels whose predicted model point the pose projects
+    back within one output cell (0 to 1); flags: those of FLAGS that hold."""
+
+    R: np.ndarray | None
+    t: np.ndarray | None
+    box: Box | None
+    score: float
+    confidence: float
+    flags: tuple[str, ...] = ()
+
+    @property
+    def quaternion(self) -> list[float] | None:
+        """R as a scalar-first unit quaternion (w, x, y, z), SPEED+'s q_vbs2tango convention."""
+        if self.R is None:
+            return None
+        x, y, z, w = Rotation.from_matrix(self.R).as_quat()
+        q = np.array([w, x, y, z])
+        return (q if w >= 0 else -q).tolist()
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "R": None if self.R is None else self.R.ravel().tolist(),
+            "t": None if self.t is None else self.t.tolist(),
+            "quaternion": self.quaternion,
+            "box": None if self.box is None else [round(float(v), 2) for v in self.box],
+            "score": round(float(self.score), 4),
+            "confidence": round(float(self.confidence), 4),
+            "flags": list(self.flags),
+        }
+
+
+NO_DETECTION = Pose(None, None, None, 0.0, 0.0, ("no_detection",))
+
+
+@dataclass
+class Timings:
+    """Milliseconds per stage over the images (STAGES), for predict's latency line."""
+
+    ms: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
+
+    def add(self, stage: str, seconds: float) -> None:
+        self.ms[stage].append(seconds * 1000.0)
+
+    def mean_ms(self) -> dict[str, float]:
+        return {s: float(np.mean(self.ms[s])) for s in STAGES if self.ms.get(s)}
+
+
+class _Clock:
+    def __init__(self, timings: Timings, stage: str) -> None:
+        self.timings, self.stage = timings, stage
+
+    def __enter__(self) -> None:
+        self.tic = time.perf_counter()
+
+    def __exit__(self, *_: object) -> None:
+        self.timings.add(self.stage, time.perf_counter() - self.tic)
+
+
+class Predictor:
+    """A pose network (and optionally a detector) ready for images from any camera."""
+
+    def __init__(
+        self,
+        model: torch.nn.Module,
+        state: dict[str, Any],
+        obj: ObjectModel,
+        camera: Camera,
+        detector: torch.nn.Module | None = None,
+        device: torch.device | None = None,
+    ) -> None:
+        cfg = config_from_dict(state["config"])
+        self.model, self.obj, self.camera, self.detector = model, obj, camera, detector
+        self.device = device or torch.device("cpu")
+        self.pad_scale, self.mask_type = cfg.data.pad_scale, cfg.loss.mask_type
+        model_cfg = state["model_config"]
+        self.input_res, self.output_res = model_cfg["input_res"], model_cfg["output_res"]
+        self.variant = cfg.variant
+        self.timings = Timings()
+
+    @classmethod
+    def load(
+        cls,
+        ckpt: Path,
+        detector: Path | None = None,
+        device: str | torch.device = "cpu",
+        data: Path | None = None,
+    ) -> Predictor:
+        """The pose checkpoint `ckpt` (and detector checkpoint) on `device`. A checkpoint written before
+        predict existed has no object or camera: `data`, the dataset it was trained on, supplies them."""
+        dev = torch.device(device)
+        state = load_checkpoint(ckpt, kind="pose")
+        if detector is not None:
+            from posenet.detection.detect import load_detector  # torchvision's FCOS: only when asked for
+
+            det_model, _ = load_detector(detector, dev)
+        else:
+            det_model = None
+        obj, camera = _object_and_camera(state, ckpt, data)
+        model, _ = load_model(ckpt, dev)
+        return cls(model, state, obj, camera, det_model, dev)
+
+    def detect(self, image: np.ndarray) -> tuple[Box, float] | None:
+        """The detector's best box [x, y, w, h] and score in an image of the training camera, or None."""
+        if self.detector is None:
+            raise PosenetError("no detector loaded: give --detector, --box or --boxes")
+        rgb = image[..., ::-1].astype(np.float32) / 255.0
+        with torch.inference_mode():
+            pred = self.detector([image_tensor(rgb).to(self.device)])[0]
+        if len(pred["scores"]) == 0:
+            return None
+        best = int(pred["scores"].argmax())
+        x0, y0, x1, y1 = (float(v) for v in pred["boxes"][best])
+        # detector boxes are pixel edges; posenet boxes cover pixels x .. x + w - 1 (centres at integers)
+        return (x0 + 0.5, y0 + 0.5, x1 - x0, y1 - y0), float(pred["scores"][best])
+
+    def __call__(self, image: np.ndarray, camera: Camera | np.ndarray, box: Box | None = None) -> Pose:
+        """The pose in `image` (H x W x 3 uint8, BGR as OpenCV reads it; grey is taken too) seen by
+        `camera` (a Camera, or a 3x3 K for a pinhole camera), at `box` ([x, y, w, h] in the image) or
+        at the detector's box."""
+        if image.ndim == 2:
+            image = np.repeat(image[..., None], 3, axis=2)
+        user = camera if isinstance(camera, Camera) else make_camera(camera)
+        user = user.with_size((image.shape[1], image.shape[0]))
+        with _Clock(self.timings, "crop"):
+            seen = to_training_camera(image, user, self.camera)
+        if box is None:
+            with _Clock(self.timings, "detector"):
+                found = self.detect(seen)
+            if found is None:
+                return NO_DETECTION
+            train_box, score = found
+            box = map_box(train_box, self.camera, user)
+        else:
+            train_box, score = map_box(box, user, self.camera), 1.0
+        with _Clock(self.timings, "crop"):
+            roi = roi_from_box(train_box, self.camera.size, self.pad_scale)
+            batch = {"roi_img": image_tensor(roi_image(seen, roi, self.input_res))}
+            batch |= roi_geometry(roi, self.camera.K, self.camera.size, self.output_res)
+            batch = {k: v[None].to(self.device) for k, v in batch.items()}
+        with _Clock(self.timings, "pose_network"), torch.inference_mode():
+            out = self.model(batch["roi_img"], batch["roi_coord2d"])
+        with _Clock(self.timings, "solve"):
+            R, t = (x[0].double().cpu().numpy() for x in decode_pose(out, batch))
+            confidence = self._confidence(out, roi, R, t)
+            flags = pose_flags(R, t, self.obj, user, confidence)
+        return Pose(R, t, tuple(float(v) for v in box), score, confidence, flags)
+
+    def _confidence(self, out: dict[str, torch.Tensor], roi: Any, R: np.ndarray, t: np.ndarray) -> float:
+        """Self-consistency of the network's two answers: the share of pixels of its visible mask whose
+        predicted model point (xyz head) the pose (Patch-PnP) projects back within one output cell."""
+        visible = (mask_probability(out["mask"].float(), self.mask_type)[0, 0] > 0.5).cpu().numpy()
+        xyz = out["xyz"][0].float().cpu().numpy()
+        points, pixels = correspondences(xyz, visible, self.obj.extent, roi.center, roi.scale)
+        if len(points) < MIN_POINTS:
+            return 0.0
+        train = Camera(self.camera.K, np.zeros(5), self.camera.size)
+        error = np.linalg.norm(project(points, R, t, train) - pixels, axis=1)
+        return float(np.mean(error <= roi.scale / self.output_res))
+
+
+def pose_flags(
+    R: np.ndarray, t: np.ndarray, obj: ObjectModel, camera: Camera, confidence: float
+) -> tuple[str, ...]:
+    """Which of behind_camera (the object's centre at z <= 0), outside_view (its centre projects outside
+    the image) and low_confidence (under LOW_CONFIDENCE) hold."""
+    flags = []
+    if t[2] <= 0:
+        flags.append("behind_camera")
+    else:
+        u, v = project(np.zeros((1, 3)), R, t, camera)[0]
+        w, h = camera.size or (np.inf, np.inf)
+        if not (-0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5):
+            flags.append("outside_view")
+    if confidence < LOW_CONFIDENCE:
+        flags.append("low_confidence")
+    return tuple(flags)
+
+
+def _object_and_camera(state: dict[str, Any], ckpt: Path, data: Path | None) -> tuple[ObjectModel, Camera]:
+    """The object and the training camera: from the checkpoint, else from the dataset `data`."""
+    cfg = config_from_dict(state["config"])
+    regions, pm = state["model_config"]["num_regions"], cfg.data.num_pm_points
+    record, cam = state.get("object", {}), state.get("camera")
+    if "vertices" in record and cam is not None:
+        return object_from_record(record, regions, pm), Camera.from_dict(cam)
+    if data is None:
+        raise PosenetError(
+            f"{ckpt} predates posenet predict (it holds no object mesh or training camera): "
+            "give --data, the dataset it was trained on"
+        )
+    instances = scan_split(data, "train", cfg.data.obj_id)
+    if not instances:
+        raise PosenetError(f"{data} has no training images of object {cfg.data.obj_id}")
+    camera, _ = training_camera([i.K for i in instances], image_size(data))
+    return load_object_model(data, cfg.data.obj_id, regions, pm), camera

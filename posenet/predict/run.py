@@ -1,0 +1,153 @@
+"""`posenet predict`'s batch: every input through the Predictor, one JSON line each, overlays, and the
+optional BOP19 results and SPEED+ submission files; an unreadable input is recorded and the batch goes on.
+
+OUT/predictions.jsonl   one line per input: source, (scene_id, im_id), Pose.to_json(), time_ms; or error
+OUT/results.csv         --format bop: BOP19 results (scene_id,im_id,obj_id,score,R,t,time; t in mm)
+OUT/submission.csv      --format speedplus: filename,q0,q1,q2,q3,x,y,z per image (Kelvins SPEC style)
+OUT/overlays/*.jpg      per image: silhouette edge, axes and box at the predicted pose (not with --no-vis)
+OUT/overlay.mp4         a video input's overlays as a video
+OUT/sheet.jpg           up to SHEET_TILES overlays spread over the inputs, side by side
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from posenet.evaluate import bop_results_csv
+from posenet.predict.camera import Camera
+from posenet.predict.overlay import contact_sheet, draw_pose
+from posenet.predict.predictor import NO_DETECTION, Box, Predictor
+from posenet.predict.sources import Frame, load_frame
+from scgen.io import atomic_write_bytes, atomic_write_text
+
+FORMATS = ("bop", "speedplus")
+MISS = "miss"  # a box file's entry for an image where its detector found nothing
+PREDICTIONS_FILE = "predictions.jsonl"
+SHEET_TILES = 8
+JPEG_QUALITY = 90
+
+
+@dataclass
+class PredictRun:
+    """What one batch produced: the JSON records, how many failed, the seconds it took."""
+
+    records: list[dict[str, Any]] = field(default_factory=list)
+    failed: int = 0
+    seconds: float = 0.0
+    files: list[Path] = field(default_factory=list)
+
+
+def overlay_name(frame: Frame, index: int) -> str:
+    if frame.key is not None:
+        return f"{frame.key[0]:06d}_{frame.key[1]:06d}.jpg"
+    return f"{index:06d}_{Path(frame.name.split('#')[0]).stem}.jpg"
+
+
+def run_predict(
+    predictor: Predictor,
+    frames: Iterable[Frame],
+    total: int,
+    out: Path,
+    camera: Camera | None,
+    box_for: Callable[[Frame, int], Box | str | None],
+    vis: bool = True,
+    formats: tuple[str, ...] = (),
+    video_fps: float = 0.0,
+    progress: Callable[[int], None] | None = None,
+    warn: Callable[[str], None] = print,
+) -> PredictRun:
+    """Predict every frame (a dataset frame brings its camera, else `camera`), writing into `out` (made
+    by the caller). `box_for(frame, index)` gives a frame's box, None for the detector's, MISS for none."""
+    run, tic = PredictRun(), time.perf_counter()
+    sheet_every = max(1, total // SHEET_TILES)
+    sheet: list[np.ndarray] = []
+    writer: cv2.VideoWriter | None = None
+    if vis and not video_fps:
+        (out / "overlays").mkdir(exist_ok=True)
+    for index, frame in enumerate(frames):
+        t0 = time.perf_counter()
+        frame = load_frame(frame)
+        predictor.timings.add("decode", time.perf_counter() - t0)
+        base: dict[str, Any] = {"source": frame.name, "index": index}
+        if frame.key is not None:
+            base |= {"scene_id": frame.key[0], "im_id": frame.key[1]}
+        if frame.image is None:
+            run.failed += 1
+            run.records.append({**base, "error": frame.error})
+            warn(f"Warning: {frame.name}: {frame.error}")
+        else:
+            cam = frame.camera or camera
+            assert cam is not None
+            before = {s: len(v) for s, v in predictor.timings.ms.items()}
+            box = box_for(frame, index)
+            pose = NO_DETECTION if box == MISS else predictor(frame.image, cam, box)  # type: ignore[arg-type]
+            if vis:
+                t1 = time.perf_counter()
+                drawn = draw_pose(frame.image, pose, predictor.obj, cam.with_size(frame.image.shape[1::-1]))
+                if video_fps:
+                    if writer is None:
+                        writer = _video_writer(out / "overlay.mp4", video_fps, drawn.shape[1::-1])
+                    writer.write(drawn)
+                else:
+                    ok, jpg = cv2.imencode(".jpg", drawn, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+                    atomic_write_bytes(out / "overlays" / overlay_name(frame, index), jpg.tobytes())
+                if index % sheet_every == 0 and len(sheet) < SHEET_TILES:
+                    sheet.append(drawn)
+                predictor.timings.add("drawing", time.perf_counter() - t1)
+            spent = {s: v[before.get(s, 0) :] for s, v in predictor.timings.ms.items()}
+            time_ms = {s: round(sum(v), 3) for s, v in spent.items() if v}
+            run.records.append({**base, **pose.to_json(), "obj_id": predictor.obj.obj_id, "time_ms": time_ms})
+        if progress is not None:
+            progress(1)
+    if writer is not None:
+        writer.release()
+        run.files.append(out / "overlay.mp4")
+    run.seconds = time.perf_counter() - tic
+    _write_outputs(run, out, formats, sheet)
+    return run
+
+
+def _video_writer(path: Path, fps: float, size: tuple[int, int]) -> cv2.VideoWriter:
+    return cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, size)
+
+
+def _write_outputs(run: PredictRun, out: Path, formats: tuple[str, ...], sheet: list[np.ndarray]) -> None:
+    lines = "".join(json.dumps(r) + "\n" for r in run.records)
+    atomic_write_text(out / PREDICTIONS_FILE, lines)
+    run.files.insert(0, out / PREDICTIONS_FILE)
+    posed = [r for r in run.records if r.get("R") is not None]
+    if "bop" in formats:
+        atomic_write_text(out / "results.csv", bop_results_csv([_bop_record(r) for r in posed]))
+        run.files.append(out / "results.csv")
+    if "speedplus" in formats:
+        rows = [
+            ",".join([submission_name(r["source"]), *map(repr, r["quaternion"]), *map(repr, r["t"])])
+            for r in posed
+        ]
+        atomic_write_text(out / "submission.csv", "".join(row + "\n" for row in rows))
+        run.files.append(out / "submission.csv")
+    if sheet:
+        ok, jpg = cv2.imencode(".jpg", contact_sheet(sheet), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+        atomic_write_bytes(out / "sheet.jpg", jpg.tobytes())
+        run.files.append(out / "sheet.jpg")
+
+
+def submission_name(source: str) -> str:
+    """An image's file name (SPEED+ labels name images without folders); a video frame keeps its name."""
+    return source if "#" in source else Path(source).name
+
+
+def _bop_record(r: dict[str, Any]) -> dict[str, Any]:
+    """A prediction as evaluate.bop_results_csv reads a record: a dataset image keeps its ids; any other
+    input is scene 0, its image id its place in the input order."""
+    ids = {"scene_id": r.get("scene_id", 0), "im_id": r.get("im_id", r["index"]), "obj_id": r["obj_id"]}
+    seconds = sum(r["time_ms"].values()) / 1000.0
+    return {**ids, "R": r["R"], "t": r["t"], "score": r["confidence"], "time_s": seconds}

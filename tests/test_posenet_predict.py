@@ -1,0 +1,258 @@
+"""`posenet predict` on real renders and real checkpoints: a dataset split gives posenet eval's poses, a
+user's files, folder, glob and video give one line each, another camera (focal length, size, lens) is
+warped into the training one exactly, and bad inputs are one line or one recorded error."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
+
+from posenet.checkpoint import load_checkpoint, save_checkpoint
+from posenet.cli import main
+from posenet.evaluate import evaluate
+from posenet.predict import Predictor, make_camera
+from posenet.predict.camera import map_box, read_camera_file, to_training_camera
+from scgen.generator import Generator
+from scgen.io import bop
+from scgen.scenes.spec import CameraSpec
+
+# a detector as a user could train it, shrunk to a step from random init: the test is of the path, not of
+# its boxes (test_posenet_detector holds the learning)
+TINY_DETECTOR = "preset: cpu\npretrained: null\nfpn_channels: 32\nhead_convs: 1\noptim: {threads: 1}\n"
+
+
+def _invoke(*args: object, code: int = 0) -> str:
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    assert res.exit_code == code, res.output
+    return res.output
+
+
+def _lines(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+@pytest.fixture(scope="module")
+def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return posenet_dataset(tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory, "pose")
+
+
+@pytest.fixture(scope="module")
+def detector_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("detector")
+    (root / "tiny.yaml").write_text(TINY_DETECTOR)
+    _invoke("train-detector", "--data", dataset_dir, "--out", root / "run", "--config", root / "tiny.yaml",
+            "--max-steps", 1)  # fmt: skip
+    return root / "run" / "last.pt"
+
+
+@pytest.fixture(scope="module")
+def user_folder(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """What a user brings: the test split's images and the dataset's camera.json, nothing else."""
+    root = tmp_path_factory.mktemp("user")
+    for i, image in enumerate(sorted((dataset_dir / "test").rglob("rgb/*"))):
+        shutil.copy(image, root / f"frame{i:02d}{image.suffix}")
+    shutil.copy(dataset_dir / bop.CAMERA_FILE, root / "camera.json")
+    return root
+
+
+def test_a_split_gives_eval_poses_and_the_field_files(dataset_dir: Path, pose_ckpt: Path, tmp_path: Path):
+    out = tmp_path / "pred"
+    _invoke("predict", "--data", dataset_dir, "--split", "test", "--ckpt", pose_ckpt, "--out", out,
+            "--format", "bop", "--format", "speedplus")  # fmt: skip
+    records = {(r["scene_id"], r["im_id"]): r for r in _lines(out / "predictions.jsonl")}
+    result = evaluate(dataset_dir, pose_ckpt, "test", workers=0)
+    assert len(records) == len(result.records) > 0
+    for r in result.records:
+        mine = records[r["scene_id"], r["im_id"]]
+        # the same crop and decoding; only the batch size differs (eval: 32 RoIs a forward, predict: 1)
+        np.testing.assert_allclose(mine["R"], r["R"], atol=1e-4)
+        np.testing.assert_allclose(mine["t"], r["t"], atol=1e-5)
+        R = np.array(mine["R"]).reshape(3, 3)
+        w, x, y, z = mine["quaternion"]  # scalar first: R of the quaternion is R
+        Rq = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                       [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                       [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])  # fmt: skip
+        np.testing.assert_allclose(Rq, R, atol=1e-5)
+        assert 0.0 <= mine["confidence"] <= 1.0 and mine["score"] == 1.0
+    csv = (out / "results.csv").read_text().splitlines()
+    assert csv[0] == "scene_id,im_id,obj_id,score,R,t,time" and len(csv) == len(records) + 1
+    sub = (out / "submission.csv").read_text().splitlines()
+    assert len(sub) == len(records) and all(len(row.split(",")) == 8 for row in sub)
+    assert len(list((out / "overlays").glob("*.jpg"))) == len(records) and (out / "sheet.jpg").is_file()
+
+
+def test_files_folder_glob_and_video(user_folder: Path, pose_ckpt: Path, tmp_path: Path):
+    images = sorted(user_folder.glob("frame*"))
+    camera = user_folder / "camera.json"
+    box = "100,60,120,120"
+    one = _lines(_predict_to(tmp_path / "one", images[0], pose_ckpt, camera, box) / "predictions.jsonl")
+    folder = _lines(_predict_to(tmp_path / "dir", user_folder, pose_ckpt, camera, box) / "predictions.jsonl")
+    pattern = str(user_folder / "frame0*")
+    globbed = _lines(_predict_to(tmp_path / "glob", pattern, pose_ckpt, camera, box) / "predictions.jsonl")
+    assert (
+        len(one) == 1
+        and len(folder) == len(images)
+        and len(globbed) == len(list(user_folder.glob("frame0*")))
+    )
+    assert folder[0]["R"] == one[0]["R"] and [r["source"] for r in folder] == [str(p) for p in images]
+    video = tmp_path / "approach.mp4"
+    first = cv2.imread(str(images[0]))
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, first.shape[1::-1])
+    for path in images:
+        writer.write(cv2.imread(str(path)))
+    writer.release()
+    out = _predict_to(tmp_path / "video", video, pose_ckpt, camera, box)
+    frames = _lines(out / "predictions.jsonl")
+    assert [r["source"] for r in frames] == [f"approach.mp4#{i:06d}" for i in range(len(images))]
+    assert all(r["R"] is not None for r in frames)
+    cap = cv2.VideoCapture(str(out / "overlay.mp4"))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == len(images)
+    cap.release()
+
+
+def _predict_to(out: Path, source: object, ckpt: Path, camera: Path, box: str) -> Path:
+    _invoke("predict", source, "--ckpt", ckpt, "--camera", camera, "--box", box, "--out", out)
+    return out
+
+
+def test_the_detector_boxes_every_image(
+    user_folder: Path, pose_ckpt: Path, detector_ckpt: Path, tmp_path: Path
+):
+    out = tmp_path / "det"
+    _invoke("predict", user_folder, "--ckpt", pose_ckpt, "--detector", detector_ckpt, "--camera",
+            user_folder / "camera.json", "--out", out, "--no-vis")  # fmt: skip
+    records = _lines(out / "predictions.jsonl")
+    assert len(records) == len(list(user_folder.glob("frame*")))
+    for r in records:  # a found box with its score and a pose, or an honest miss
+        assert (r["box"] is not None and r["R"] is not None) or r["flags"] == ["no_detection"]
+    assert not (out / "overlays").exists() and not (out / "sheet.jpg").exists()
+
+
+def test_a_bad_image_is_recorded_and_the_batch_goes_on(user_folder: Path, pose_ckpt: Path, tmp_path: Path):
+    folder = tmp_path / "in"
+    shutil.copytree(user_folder, folder)
+    (folder / "frame99.png").write_bytes(b"not a png")
+    out = tmp_path / "out"
+    args = ["predict", folder, "--ckpt", pose_ckpt, "--camera", folder / "camera.json", "--box", "9,9,50,50"]
+    res = CliRunner().invoke(main, [str(a) for a in [*args, "--out", out]])
+    assert res.exit_code == 1
+    assert "Warning: " in res.output and "frame99.png" in res.output
+    assert res.output.strip().splitlines()[-1].startswith("Error: 1 of")
+    records = _lines(out / "predictions.jsonl")
+    assert records[-1]["error"].startswith("cannot read image") and records[-1]["source"].endswith(
+        "frame99.png"
+    )
+    assert all(r["R"] is not None for r in records[:-1])
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--ckpt", "missing.pt"], "checkpoint not found: missing.pt"),
+        (["--camera", "1,2,3"], "--camera '1,2,3' needs 4 numbers"),
+        (["--camera", "nosuchpreset"], "unknown camera preset 'nosuchpreset'"),
+        (["--box", "1,2,3"], "--box must be x,y,w,h"),
+        (["--source", "nothing/here*.png"], "no file matches"),
+    ],
+)
+def test_bad_inputs_are_one_line_and_write_nothing(
+    user_folder: Path, pose_ckpt: Path, tmp_path: Path, args: list[str], message: str
+):
+    opts = {"--ckpt": str(pose_ckpt), "--camera": str(user_folder / "camera.json"), "--box": "1,1,9,9",
+            "--source": str(user_folder)}  # fmt: skip
+    opts.update(dict(zip(args[::2], args[1::2], strict=True)))
+    source = opts.pop("--source")
+    out = tmp_path / "new" / "out"
+    res = CliRunner().invoke(
+        main, ["predict", source, *sum(([k, v] for k, v in opts.items()), []), "--out", str(out)]
+    )
+    assert res.exit_code != 0 and res.output.count("\n") == 1, res.output
+    assert res.output.startswith("Error: ") and message in res.output
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_detector_checkpoint_as_the_pose_one_is_named(
+    detector_ckpt: Path, user_folder: Path, tmp_path: Path
+):
+    out = _invoke("predict", user_folder, "--ckpt", detector_ckpt, "--camera", "training", "--box", "1,1,9,9",
+                  "--out", tmp_path / "o", code=1)  # fmt: skip
+    assert (
+        "is a detector checkpoint (posenet train-detector's), not a pose one" in out
+        and out.count("\n") == 1
+        and not (tmp_path / "o").exists()
+    )
+
+
+def test_an_existing_output_needs_overwrite(user_folder: Path, pose_ckpt: Path, tmp_path: Path):
+    out = tmp_path / "out"
+    args = ["predict", sorted(user_folder.glob("frame*"))[0], "--ckpt", pose_ckpt, "--camera", "training", "--box",
+            "1,1,60,60", "--out", out, "--no-vis"]  # fmt: skip
+    _invoke(*args)
+    assert "exists (give --overwrite" in _invoke(*args, code=1)
+    _invoke(*args, "--overwrite")
+
+
+def test_an_old_checkpoint_takes_its_dataset(dataset_dir: Path, pose_ckpt: Path, tmp_path: Path):
+    """A checkpoint from before predict (no object, no camera) is named, and --data fills both in."""
+    state = load_checkpoint(pose_ckpt)
+    del state["camera"]
+    state["object"] = {"extent": state["object"]["extent"], "diameter": state["object"]["diameter"]}
+    old = tmp_path / "old.pt"
+    save_checkpoint(old, state)
+    with pytest.raises(Exception, match="predates posenet predict"):
+        Predictor.load(old)
+    new, refilled = Predictor.load(pose_ckpt), Predictor.load(old, data=dataset_dir)
+    assert new.camera.same_as(refilled.camera)
+    np.testing.assert_array_equal(new.obj.pm_points, refilled.obj.pm_points)
+
+
+def test_another_camera_is_warped_into_the_training_one():
+    """The same scenes rendered through the training camera (320x240, f 300) and through another (480x360,
+    f 400, a wider view, barrel distortion): the other camera's visible mask, warped by predict's camera
+    step, lands on the training camera's mask, and its box maps onto the training box."""
+    other = CameraSpec(480, 360, (400.0, 0.0, 241.0, 0.0, 400.0, 178.5, 0.0, 0.0, 1.0), 0.0,
+                       (-0.18, 0.05, 0.0005, -0.0003, 0.0))  # fmt: skip
+    with Generator.load(
+        seed=4, resolution=(320, 240), backend="mitsuba", quality="draft", camera="ideal"
+    ) as gen:
+        for index in range(3):
+            spec = gen.scene(index)
+            a = gen.render(spec).annotation
+            b = gen.render(dataclasses.replace(spec, camera=other)).annotation
+            train = make_camera(spec.camera.K_mat, None, (spec.camera.width, spec.camera.height))
+            user = make_camera(other.K_mat, other.dist, (other.width, other.height))
+            warped = to_training_camera(b.mask_visib.astype(np.uint8) * 255, user, train) > 127
+            # exact up to resampling: the masks differ on a fraction of the outline's pixels (measured at
+            # most 0.3 of them), and their centres agree to a pixel (measured 0.6 px at most)
+            outline = cv2.Canny(a.mask_visib.astype(np.uint8) * 255, 0, 1).astype(bool).sum()
+            assert (warped ^ a.mask_visib).sum() <= 0.5 * outline, index
+            centre = np.argwhere(warped).mean(0) - np.argwhere(a.mask_visib).mean(0)
+            assert np.abs(centre).max() <= 1.0, (index, centre)
+            mapped = np.array(map_box(tuple(b.bbox_visib), user, train))
+            np.testing.assert_allclose(mapped, a.bbox_visib, atol=1.5)
+            # without its lens the same image lands elsewhere: the distortion is what the warp undid
+            pinhole = make_camera(other.K_mat, None, (other.width, other.height))
+            wrong = to_training_camera(b.mask_visib.astype(np.uint8) * 255, pinhole, train) > 127
+            assert (wrong ^ a.mask_visib).sum() > (warped ^ a.mask_visib).sum()
+
+
+def test_a_speedplus_camera_file_reads_its_lens(tmp_path: Path):
+    path = tmp_path / "camera.json"
+    K = [[2988.6, 0, 960], [0, 2988.3, 600], [0, 0, 1]]
+    dist = [-0.22, 0.51, -0.0007, -0.0002, -0.13]
+    path.write_text(json.dumps({"Nu": 1920, "Nv": 1200, "cameraMatrix": K, "distCoeffs": dist}))
+    cam = read_camera_file(path)
+    assert cam.size == (1920, 1200) and cam.distorted and cam.K[0, 0] == 2988.6
