@@ -6,7 +6,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -198,9 +201,9 @@ def test_a_detector_checkpoint_as_the_pose_one_is_named(
 
 def test_an_existing_output_needs_overwrite(user_folder: Path, pose_ckpt: Path, tmp_path: Path):
     out = tmp_path / "out"
-    args = ["predict", sorted(user_folder.glob("frame*"))[0], "--ckpt", pose_ckpt, "--camera", "training", "--box",
-            "1,1,60,60", "--out", out, "--no-vis"]  # fmt: skip
-    _invoke(*args)
+    image = sorted(user_folder.glob("frame*"))[0]
+    args = ["predict", image, "--ckpt", pose_ckpt, "--camera", "training", "--box", "1,1,60,60", "--out", out]
+    _invoke(*args, "--no-vis")
     assert "exists (give --overwrite" in _invoke(*args, code=1)
     _invoke(*args, "--overwrite")
 
@@ -256,3 +259,16 @@ def test_a_speedplus_camera_file_reads_its_lens(tmp_path: Path):
     path.write_text(json.dumps({"Nu": 1920, "Nv": 1200, "cameraMatrix": K, "distCoeffs": dist}))
     cam = read_camera_file(path)
     assert cam.size == (1920, 1200) and cam.distorted and cam.K[0, 0] == 2988.6
+
+
+def test_the_readme_predict_example_runs_as_written(pose_ckpt: Path, user_folder: Path, tmp_path: Path):
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = readme[readme.index("## Python API") :]
+    example = re.findall(r"```python\n(.*?)```", section, re.S)[1]
+    (tmp_path / "runs" / "cpu").mkdir(parents=True)
+    shutil.copy(pose_ckpt, tmp_path / "runs" / "cpu" / "last.pt")
+    shutil.copy(sorted(user_folder.glob("frame*"))[0], tmp_path / "frame.png")
+    out = subprocess.run([sys.executable, "-c", example], capture_output=True, text=True, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    quaternion = json.loads(out.stdout[: out.stdout.index("]") + 1])
+    assert len(quaternion) == 4 and abs(np.linalg.norm(quaternion) - 1) < 1e-6
