@@ -84,7 +84,10 @@ def main() -> None:
 
 
 @main.command()
-@click.option("--n", "n", type=int, required=True, help="Number of samples (sample ids 0..n-1).")
+@click.option(
+    "--n", "n", type=int, required=True,
+    help="Number of samples (sample ids 0..n-1), or of sequences with a [sequence] config table.",
+)  # fmt: skip
 @click.option(
     "--out", type=click.Path(path_type=Path), required=True, help="Dataset folder (created or resumed)."
 )
@@ -188,7 +191,7 @@ def render(
     rate = summary["rendered"] / summary["total_s"] if summary["total_s"] > 0 else 0.0
     click.echo(
         f"{out}: rendered {summary['rendered']} (skipped {summary['skipped']} already complete), "
-        f"{summary['complete']}/{n} on disk, {rate:.2f} img/s; "
+        f"{summary['complete']}/{summary['total']} on disk, {rate:.2f} img/s; "
         + ", ".join(f"{k} {v}" for k, v in summary["splits"].items())
     )
 

@@ -18,6 +18,8 @@ from scgen.annotate import Annotation, annotate
 from scgen.io.buffers import Buffers
 from scgen.scenes import SceneSpec, TargetShape, load_config, sample_scene
 from scgen.scenes.model import TargetModel, load_target
+from scgen.scenes.sequence import is_sequence, sample_sequence
+from scgen.scenes.tumble import MassProperties, mass_properties
 
 
 @dataclass(frozen=True)
@@ -44,6 +46,8 @@ class Generator:
         self.render_settings = {"backend": backend, "quality": quality, "device": device, "threads": threads}
         self.model_source: tuple[Path | None, bool] | None = None  # (file, keep_scale) when loaded from one
         self._backend: Any = None
+        self._mass: MassProperties | None = None  # the target's inertia, for a sequence's attitude
+        self._sequence: tuple[int, list[SceneSpec]] | None = None
 
     @classmethod
     def load(
@@ -62,8 +66,27 @@ class Generator:
         return generator
 
     def scene(self, index: int) -> SceneSpec:
-        """The SceneSpec of sample `index`: pure and cheap, no renderer involved."""
+        """The SceneSpec of sample `index`: pure and cheap, no renderer involved. With a `[sequence]`
+        table, sample index s * frames + k is frame k of sequence s."""
+        if is_sequence(self.cfg):
+            sequence, frame = divmod(index, self.cfg["sequence"]["frames"])
+            return self.sequence(sequence)[frame]
         return sample_scene(self.seed, index, self.cfg, self.shape)
+
+    @property
+    def frames(self) -> int:
+        """Samples per sequence: the `[sequence]` table's frames, 1 without one."""
+        return self.cfg["sequence"]["frames"] if is_sequence(self.cfg) else 1
+
+    def sequence(self, sequence: int) -> list[SceneSpec]:
+        """The SceneSpecs of every frame of sequence `sequence` (the last one asked is kept: a whole
+        sequence is computed at once, the tumble integrated over its span)."""
+        if self._sequence is None or self._sequence[0] != sequence:
+            if self._mass is None:
+                self._mass = mass_properties([mesh for _, mesh in self.model.parts])
+            specs = sample_sequence(self.seed, sequence, self.cfg, self.shape, self._mass)
+            self._sequence = (sequence, specs)
+        return self._sequence[1]
 
     def render(self, spec: SceneSpec) -> Sample:
         """Render and annotate one SceneSpec."""

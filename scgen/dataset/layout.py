@@ -16,7 +16,7 @@ from scgen.io.bop import NOT_A_FOLDER, not_a_dataset, read_json
 MANIFEST = "scgen.json"
 # 2: depth by default, scene_gt_info in bop_toolkit's conventions, models_eval/, test targets
 FORMAT = "scgen-bop/2"
-CHUNK = 1000  # samples per BOP scene folder: scene_id = sample_id // CHUNK; im_id = sample_id
+CHUNK = 1000  # samples per BOP scene folder (a sequence has its own): scene_id = sample_id // CHUNK
 OBJ_ID = 1  # the target's BOP object id
 # --rgb-format: an rgb/ file extension, or auto (the camera's: scgen.dataset.writer.rgb_format_for)
 RGB_FORMATS = ("auto", "png", "jpg")
@@ -24,13 +24,31 @@ TARGET_INSTANCE = 0  # the target is the only annotated instance of each image
 
 
 class Layout:
-    """Paths of one dataset's files; sample ids double as BOP im_ids."""
+    """Paths of one dataset's files; sample ids double as BOP im_ids.
 
-    def __init__(self, root: str | Path) -> None:
+    A BOP scene folder holds `scene_size` consecutive samples: CHUNK, or a sequence's frames (the
+    manifest's `sequence.frames`), so that scene_id is the sequence id. Given, or read from the manifest on
+    first use."""
+
+    def __init__(self, root: str | Path, scene_size: int | None = None) -> None:
         self.root = Path(root)
+        self._scene_size = scene_size
+
+    @property
+    def scene_size(self) -> int:
+        """Samples per BOP scene folder."""
+        if self._scene_size is None:
+            if not self.manifest_path.is_file():
+                return CHUNK
+            self._scene_size = scene_size_of(read_json(self.manifest_path))
+        return self._scene_size
+
+    def scene_id(self, sample_id: int) -> int:
+        """The BOP scene of a sample: its chunk, or its sequence."""
+        return sample_id // self.scene_size
 
     def chunk_dir(self, split: str, sample_id: int) -> Path:
-        return bop.scene_dir(self.root, split, sample_id // CHUNK)
+        return bop.scene_dir(self.root, split, self.scene_id(sample_id))
 
     def rgb(self, split: str, sample_id: int, ext: str = "png") -> Path:
         return bop.rgb_path(self.chunk_dir(split, sample_id), sample_id, ext)
@@ -77,6 +95,18 @@ class Layout:
 
     def record_paths(self) -> Iterator[Path]:
         yield from sorted(self.root.glob("*/[0-9]*/records/[0-9]*.json"))
+
+
+def scene_size_of(manifest: dict[str, Any]) -> int:
+    """Samples per BOP scene folder of a dataset with this manifest: its sequences' frames, else CHUNK."""
+    sequence = manifest.get("sequence")
+    return int(sequence["frames"]) if sequence else CHUNK
+
+
+def sample_count(manifest: dict[str, Any]) -> int:
+    """Samples (images) of a whole dataset with this manifest: n, or n sequences of their frames."""
+    sequence = manifest.get("sequence")
+    return int(manifest["n"]) * (int(sequence["frames"]) if sequence else 1)
 
 
 DATASET_FILES = "dataset files"  # bytes_by_kind's kind of the root's files, models/ and models_eval/

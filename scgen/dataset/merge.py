@@ -5,7 +5,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from scgen.dataset.layout import MANIFEST, Layout, open_dataset
+from scgen.dataset.layout import MANIFEST, Layout, open_dataset, sample_count
 from scgen.dataset.writer import finalize
 from scgen.errors import ScgenError
 
@@ -15,7 +15,7 @@ SAMPLE_FOLDERS = ("rgb", "mask", "mask_visib", "xyz", "depth", "records")
 def merge_shards(out: Path, shards: list[Path]) -> tuple[int, int]:
     """Copy every complete sample of `shards` into `out` (created from the first shard); finalize.
 
-    Returns (samples in out, n of the manifest). Shards must share one manifest (seed, n, config,
+    Returns (samples in out, samples of the whole dataset). Shards must share one manifest (seed, n, config,
     model, backend, ...); `out` may be one of the shards or a new folder.
     """
     manifests = [open_dataset(s)[1] for s in shards]
@@ -45,7 +45,7 @@ def merge_shards(out: Path, shards: list[Path]) -> tuple[int, int]:
             dest = out / rel / "records" / record.name  # the record last: the sample is then complete
             dest.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(record, dest)
-    return finalize(layout), manifests[0]["n"]
+    return finalize(layout), sample_count(manifests[0])
 
 
 def _only_static(directory: str, names: list[str]) -> list[str]:

@@ -38,7 +38,7 @@ from scgen.scenes.geometry import matrix_to_quat
 from scgen.scenes.imaging import IDEAL_IMAGING, mid_grey_snr
 from scgen.scenes.model import TargetModel
 from scgen.scenes.sky import background_holds, sky_labels
-from scgen.scenes.spec import CameraSpec, SceneSpec
+from scgen.scenes.spec import SEQUENCE_COLUMNS, CameraSpec, SceneSpec
 
 METADATA_COLUMNS = (
     "sample_id", "split", "scene_id", "im_id", "illumination", "sun_irradiance_w_m2", "exposure_ev",
@@ -62,11 +62,15 @@ class WriteOptions:
     save_depth: bool = True  # BOP uint16 depth maps (bop_toolkit's calc_gt_info and VSD need them)
 
 
-def dataset_depth_scale(cfg: dict[str, Any], model: TargetModel) -> float:
+def dataset_depth_scale(
+    cfg: dict[str, Any], model: TargetModel, max_distance_m: float | None = None
+) -> float:
     """The dataset's depth scale (mm per unit): every target point fits, at the largest sampled distance
-    plus the model's radius about its origin (|z| <= |t| + |v|); what lies farther is stored as 0."""
+    (`max_distance_m` where given: a sequence dataset's farthest frame; else the config's range) plus the
+    model's radius about its origin (|z| <= |t| + |v|); what lies farther is stored as 0."""
     radius = float(np.linalg.norm(np.asarray(model.mesh.vertices), axis=1).max())
-    return bop.depth_scale_for(distance_range_m(cfg, model.diameter)[1] + radius)
+    farthest = distance_range_m(cfg, model.diameter)[1] if max_distance_m is None else max_distance_m
+    return bop.depth_scale_for(farthest + radius)
 
 
 def dataset_target(layout: Layout) -> tuple[np.ndarray, np.ndarray, float]:
@@ -188,7 +192,7 @@ def build_record(
     meta = {
         "sample_id": spec.index,
         "split": split,
-        "scene_id": spec.index // CHUNK,
+        "scene_id": spec.sequence.sequence if spec.sequence else spec.index // CHUNK,
         "im_id": spec.index,
         "illumination": spec.sun.level,
         "sun_irradiance_w_m2": spec.sun.irradiance,
@@ -233,6 +237,7 @@ def build_record(
         "finish": finish_group(spec.finish),
         **sky_labels(spec.background.params),
         **(spec.cone.labels() if spec.cone else {}),
+        **(spec.sequence.labels() if spec.sequence else {}),
     }
     scene_camera = {"cam_K": list(spec.camera.K), "depth_scale": depth_scale, "exposure_ev": exposure_ev}
     if not spec.camera.pinhole:
@@ -254,7 +259,7 @@ def finalize(layout: Layout) -> int:
     chunk however large the dataset; rows and targets come out in sample order."""
     by_chunk: dict[int, list[Path]] = defaultdict(list)
     for path in layout.record_paths():
-        by_chunk[int(path.stem) // CHUNK].append(path)
+        by_chunk[layout.scene_id(int(path.stem))].append(path)
     out = io.StringIO()
     writer: csv.DictWriter | None = None
     images: list[TargetImage] = []
@@ -284,8 +289,14 @@ def finalize(layout: Layout) -> int:
 
 def metadata_columns(record: dict[str, Any]) -> tuple[str, ...]:
     """metadata.csv's columns for a dataset holding `record`: every dataset's, then a cone attitude's
-    (scgen.scenes.attitude.CONE_COLUMNS) when its samples were drawn in a cone."""
-    return METADATA_COLUMNS + (CONE_COLUMNS if CONE_COLUMNS[0] in record["metadata"] else ())
+    (scgen.scenes.attitude.CONE_COLUMNS) when its samples were drawn in a cone, then a sequence frame's
+    (scgen.scenes.spec.SEQUENCE_COLUMNS) when they are frames of sequences."""
+    meta = record["metadata"]
+    return (
+        METADATA_COLUMNS
+        + (CONE_COLUMNS if CONE_COLUMNS[0] in meta else ())
+        + (SEQUENCE_COLUMNS if SEQUENCE_COLUMNS[0] in meta else ())
+    )
 
 
 TargetImage = tuple[int, int, list[dict[str, Any]], list[dict[str, Any]]]  # scene, image, scene_gt, gt_info
@@ -294,7 +305,7 @@ TargetImage = tuple[int, int, list[dict[str, Any]], list[dict[str, Any]]]  # sce
 def target_images(test_records: list[dict[str, Any]]) -> list[TargetImage]:
     """(scene_id, im_id, scene_gt, scene_gt_info) of each test record, what the target lists read."""
     return [
-        (r["sample_id"] // CHUNK, r["sample_id"], r["scene_gt"], r["scene_gt_info"]) for r in test_records
+        (r["metadata"]["scene_id"], r["sample_id"], r["scene_gt"], r["scene_gt_info"]) for r in test_records
     ]
 
 

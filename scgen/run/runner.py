@@ -34,6 +34,7 @@ from scgen.render.conventions import check_quality
 from scgen.run.executors import run_local, run_ray
 from scgen.run.worker import Done, Task, WorkerSettings
 from scgen.scenes.factors import spec_key
+from scgen.scenes.sequence import is_sequence
 from scgen.scenes.spec import SceneSpec
 
 
@@ -73,6 +74,11 @@ class Plan:
     keys: list[str]
     write: WriteOptions  # the job's, its rgb format resolved for the camera (never auto)
 
+    @property
+    def n_samples(self) -> int:
+        """Samples (images) of the job: --n, or --n sequences of the config's frames each."""
+        return len(self.specs)
+
 
 def validate_job(job: RenderJob) -> None:
     """Checks that need no heavy work; raise ScgenError naming the bad value."""
@@ -101,10 +107,23 @@ def make_plan(job: RenderJob) -> Plan:
         threads=renderer_threads(job.backend, job.workers, job.threads),
     )  # fmt: skip
     rgb_format = rgb_format_for(job.write.rgb_format, generator.cfg["camera"])
-    specs = sample_all(generator, job.n, job.workers)
-    keys = [spec_key(s) for s in specs]
-    splits = plan_splits(keys, job.ratios, job.seed, job.split_by)
+    specs = sample_all(generator, job.n * generator.frames, job.workers)
+    if is_sequence(generator.cfg):
+        keys, splits = sequence_splits(specs, generator.frames, job)
+    else:
+        keys = [spec_key(s) for s in specs]
+        splits = plan_splits(keys, job.ratios, job.seed, job.split_by)
     return Plan(generator, specs, splits, keys, replace(job.write, rgb_format=rgb_format))
+
+
+def sequence_splits(specs: list[SceneSpec], frames: int, job: RenderJob) -> tuple[list[str], list[str]]:
+    """(key, split) of every frame, whole sequences to one split: planned over the sequences, each keyed
+    by its motion (profile and attitude mode: a factor split holds motions unseen in training), or at
+    random with --split-by random."""
+    firsts = specs[::frames]
+    keys = [f"{s.sequence.profile}|{s.sequence.attitude}" for s in firsts if s.sequence]
+    splits = plan_splits(keys, job.ratios, job.seed, job.split_by)
+    return [k for k in keys for _ in range(frames)], [s for s in splits for _ in range(frames)]
 
 
 def _sample_range(args: tuple[Generator, range]) -> list[SceneSpec]:
@@ -140,15 +159,24 @@ def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:
         "rgb_format": plan.write.rgb_format,
         "xyz_dtype": plan.write.xyz_dtype,
         "save_depth": plan.write.save_depth,
+        **sequence_manifest(plan.generator.cfg, job.n),
     }  # fmt: skip
 
 
-def write_static_files(layout: Layout, generator: Generator) -> None:
-    """The files every sample's writer reads: camera.json (with the dataset's depth scale), config.json,
-    the BOP models and the evaluation models."""
+def sequence_manifest(cfg: dict[str, Any], n: int) -> dict[str, Any]:
+    """The manifest's `sequence` entry (a sequence dataset only): what Layout reads its scene size from."""
+    if not is_sequence(cfg):
+        return {}
+    return {"sequence": {"count": n, "frames": cfg["sequence"]["frames"], "dt_s": cfg["sequence"]["dt_s"]}}
+
+
+def write_static_files(layout: Layout, generator: Generator, farthest_m: float | None = None) -> None:
+    """The files every sample's writer reads: camera.json (with the dataset's depth scale: to
+    `farthest_m` where given, else the config's distance range), config.json, the BOP models and the
+    evaluation models."""
     layout.root.mkdir(parents=True, exist_ok=True)
     cam = generator.cfg["camera"]
-    depth_scale = dataset_depth_scale(generator.cfg, generator.model)
+    depth_scale = dataset_depth_scale(generator.cfg, generator.model, farthest_m)
     camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
               "height": cam["height"], "depth_scale": depth_scale}  # fmt: skip
     atomic_write_text(layout.camera_path, dumps(camera))
@@ -159,7 +187,7 @@ def write_static_files(layout: Layout, generator: Generator) -> None:
 
 def prepare_output(job: RenderJob, plan: Plan) -> Layout:
     """Create the dataset folder and its static files, or check that an existing one matches."""
-    layout = Layout(job.out)
+    layout = Layout(job.out, plan.generator.frames if is_sequence(plan.generator.cfg) else None)
     manifest = manifest_for(job, plan)
     if layout.manifest_path.exists():
         old = read_json(layout.manifest_path)
@@ -171,7 +199,8 @@ def prepare_output(job: RenderJob, plan: Plan) -> Layout:
             )
         remove_stale_temporaries(layout.root)
         return layout
-    write_static_files(layout, plan.generator)
+    farthest = max(s.distance_m for s in plan.specs) if is_sequence(plan.generator.cfg) else None
+    write_static_files(layout, plan.generator, farthest)
     atomic_write_text(
         layout.splits_path,
         dumps({"split_by": job.split_by, "ratios": list(job.ratios), "seed": job.seed,
@@ -198,7 +227,7 @@ def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
     done = existing_sample_ids(layout)
     tasks = [
         Task(i, plan.splits[i], plan.specs[i].to_dict())
-        for i in shard_indices(job.n, job.shard)
+        for i in shard_indices(plan.n_samples, job.shard)
         if i not in done
     ]
     settings = WorkerSettings(plan.generator, job.out, plan.write)
@@ -228,6 +257,7 @@ def run_render(job: RenderJob, progress: bool = True) -> dict[str, Any]:
         "rendered": len(tasks),
         "skipped": len(done),
         "complete": n_done,
+        "total": plan.n_samples,
         "total_s": time.perf_counter() - t0,
         **timings,
         "splits": {s: plan.splits.count(s) for s in SPLITS},

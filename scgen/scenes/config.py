@@ -22,6 +22,7 @@ from scgen.scenes.camera_config import DEFAULT_CAMERA, camera_preset, check_came
 from scgen.scenes.checks import check_prob, check_range, is_number
 from scgen.scenes.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
 from scgen.scenes.finish import FINISH_MODES
+from scgen.scenes.sequence import check_sequence, merge_sequence
 from scgen.scenes.sky import BODIES
 from scgen.scenes.sky_data import BLUE_MARBLE, HIPPARCOS, resolve_source
 from scgen.scenes.spec import CameraSpec
@@ -180,6 +181,8 @@ def load_config(
         layer = copy.deepcopy(layer)
         if isinstance(layer.get("camera"), dict):
             layer["camera"].pop("preset", None)
+        if "sequence" in layer:  # only where given: an independent-frame config stays what it was
+            cfg["sequence"] = merge_sequence({**cfg.get("sequence", {}), **layer.pop("sequence")})
         _merge(cfg, layer)
     if resolution is not None:
         apply_resolution(cfg, *resolution)
@@ -280,6 +283,8 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
     check_prob("occluders.distractor_prob", occ["distractor_prob"])
     _resolve_background(cfg["background"])
     _check_finish(cfg["finish"])
+    if "sequence" in cfg:
+        check_sequence(cfg["sequence"])
     if not 0 <= cfg["illumination"]["max_phase_deg"] <= 180:
         raise ScgenError("illumination.max_phase_deg must lie in [0, 180]")
     near = cfg["illumination"]["sun_near_view"]

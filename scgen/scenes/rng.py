@@ -21,3 +21,16 @@ def factor_rng(seed: int, index: int, factor: str) -> np.random.Generator:
     if factor not in FACTORS:
         raise ValueError(f"unknown factor stream {factor!r}")
     return np.random.default_rng([int(seed), int(index), zlib.crc32(factor.encode())])
+
+
+SEQUENCE_PARTS = ("orbit", "profile", "attitude", "sun", "pointing", "camera", "background", "finish", "sky")
+_SEQUENCE_TAG = zlib.crc32(b"sequence")
+
+
+def sequence_rng(seed: int, sequence: int, part: str) -> np.random.Generator:
+    """A generator that depends only on (seed, sequence, part): a rendezvous sequence's own draws, in a
+    key space apart from the samples' (four words, not three), so sequence s never shares a stream with
+    sample s."""
+    if part not in SEQUENCE_PARTS:
+        raise ValueError(f"unknown sequence stream {part!r}")
+    return np.random.default_rng([int(seed), int(sequence), _SEQUENCE_TAG, zlib.crc32(part.encode())])

@@ -52,11 +52,26 @@ def draw_sky(rng: np.random.Generator, sun_cam: np.ndarray) -> dict[str, Any]:
 def sky_params(kind: str, cfg: dict[str, Any], rng: np.random.Generator, sun_cam: np.ndarray) -> dict:
     """What the real sky adds to a background's params (config `background`): with Hipparcos stars or a
     Blue Marble Earth in the frame, the drawn sky and the sources; nothing for procedural skies."""
+    if not shows_sky(kind, cfg):
+        return {}
+    return sky_background(kind, cfg, draw_sky(rng, sun_cam))
+
+
+def shows_sky(kind: str, cfg: dict[str, Any]) -> bool:
+    """Whether a background of this kind shows the real sky: Hipparcos stars or a Blue Marble Earth."""
+    return (kind in SKY_KINDS and cfg["stars"] == "hipparcos") or (
+        kind == "earth" and cfg["earth_map"] == "bluemarble"
+    )
+
+
+def sky_background(kind: str, cfg: dict[str, Any], sky: dict[str, Any]) -> dict:
+    """A background's sky params from its sky (`draw_sky`'s keys: sky_frame, earth_spin_deg) and the
+    config's sources; {} where the kind shows no real sky."""
+    if not shows_sky(kind, cfg):
+        return {}
     stars = kind in SKY_KINDS and cfg["stars"] == "hipparcos"
     earth = kind == "earth" and cfg["earth_map"] == "bluemarble"
-    if not (stars or earth):
-        return {}
-    out = draw_sky(rng, sun_cam)
+    out = dict(sky)
     if stars:
         out |= {"stars": "hipparcos", "stars_boost_ev": float(cfg["stars_boost_ev"])}
     if earth:

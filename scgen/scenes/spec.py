@@ -169,6 +169,41 @@ class ImagingSpec:
     camera: CameraSettings = field(default_factory=CameraSettings)
 
 
+SEQUENCE_COLUMNS = (
+    "sequence_id", "frame", "time_s", "vx", "vy", "vz", "wx", "wy", "wz", "eclipse", "profile",
+    "attitude_mode", "range_m", "altitude_km",
+)  # fmt: skip  # metadata.csv's columns of a sequence frame (docs/dataset.md)
+
+
+@dataclass(frozen=True)
+class SequenceFrame:
+    """Where a frame sits in its rendezvous sequence (scgen.scenes.sequence) and the motion there.
+
+    `velocity`: d t / dt, the rate of the labelled translation t (m/s, model-frame metres, camera axes);
+    `angular_velocity`: the target's angular velocity relative to the camera (rad/s, camera axes), so
+    dR/dt = [w]x R. `range_m` is the chaser-target distance in metres of the real spacecraft (before the
+    scale to the model); `eclipse`: the target in the Earth's shadow.
+    """
+
+    sequence: int
+    frame: int
+    time_s: float
+    velocity: tuple[float, float, float]
+    angular_velocity: tuple[float, float, float]
+    eclipse: bool
+    profile: str
+    attitude: str
+    range_m: float
+    altitude_km: float
+
+    def labels(self) -> dict[str, Any]:
+        """The metadata.csv columns (SEQUENCE_COLUMNS) of this frame."""
+        (vx, vy, vz), (wx, wy, wz) = self.velocity, self.angular_velocity
+        values = (self.sequence, self.frame, self.time_s, vx, vy, vz, wx, wy, wz, int(self.eclipse),
+                  self.profile, self.attitude, self.range_m, self.altitude_km)  # fmt: skip
+        return dict(zip(SEQUENCE_COLUMNS, values, strict=True))
+
+
 @dataclass(frozen=True)
 class SceneSpec:
     """Everything a backend needs to render sample `index` of `seed`, and every sampled factor's label."""
@@ -186,16 +221,19 @@ class SceneSpec:
     imaging: ImagingSpec | None = None  # None: the ideal camera (no stage draws)
     finish: dict[str, dict[str, Any]] = field(default_factory=dict)  # scgen.scenes.finish; {}: nominal
     cone: ConeDraw | None = None  # a cone attitude's place in its corridor (scgen.scenes.attitude)
+    sequence: SequenceFrame | None = None  # a rendezvous sequence's frame (scgen.scenes.sequence)
 
     @property
     def occluders(self) -> tuple[PropSpec, ...]:
         return tuple(p for p in self.props if p.role == "occluder")
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data; `cone` only when drawn, so a uniform attitude's record is what it always was."""
+        """Plain data; `cone` and `sequence` only when set, so an independent sample's record is what it
+        always was."""
         d = asdict(self)
-        if self.cone is None:
-            del d["cone"]
+        for key in ("cone", "sequence"):
+            if d[key] is None:
+                del d[key]
         return d
 
     @staticmethod
@@ -231,7 +269,14 @@ class SceneSpec:
             imaging=_imaging(d["imaging"]) if d.get("imaging") else None,
             finish=d.get("finish", {}),
             cone=ConeDraw(**d["cone"]) if d.get("cone") else None,
+            sequence=_sequence_frame(d["sequence"]) if d.get("sequence") else None,
         )
+
+
+def _sequence_frame(d: dict[str, Any]) -> SequenceFrame:
+    return SequenceFrame(
+        **{**d, "velocity": tuple(d["velocity"]), "angular_velocity": tuple(d["angular_velocity"])}
+    )
 
 
 def _imaging(d: dict[str, Any]) -> ImagingSpec:

@@ -89,8 +89,8 @@ def sun_flare(image: np.ndarray, spec: SceneSpec, instance: np.ndarray, ev_total
     camera = spec.camera
     s = np.asarray(spec.sun.direction, np.float64)
     view = sun_view(camera, s)
-    if not glare.flare or view is None or view.off_view_rad > FLARE_REACH_RAD:
-        return image, False
+    if not glare.flare or view is None or view.off_view_rad > FLARE_REACH_RAD or spec.sun.irradiance <= 0:
+        return image, False  # (no irradiance: a sequence's frame in eclipse, the sun behind the Earth)
     plate = spec.sun.irradiance / SOLAR_CONSTANT * 2.0 ** (-ev_total)  # value of a white plate facing it
     h, w = image.shape[:2]
     y, x = optics.pixel_grid(camera)

@@ -1,0 +1,365 @@
+"""Rendezvous sequences: the config's `[sequence]` table, and sequence s of a seed as SceneSpecs, one a frame.
+
+A sequence draws, each from its own stream (`sequence_rng(seed, s, part)`), an orbit, a relative-motion
+profile and an attitude motion (scgen.scenes.orbit, scgen.scenes.tumble), a sun fixed in inertial space,
+a camera pointing and a camera; frame k at t_k = k dt is then an ordinary SceneSpec, with the camera at the
+chaser (its frame the scene's world frame, as for every sample), so the render, camera, annotation and
+writer paths are those of an independent sample. Every frame is computed from the whole sequence at once
+(the tumble integrated over the whole span, the pointing carried from frame to frame), so frame k is the
+same whatever frames are asked for. Pure numpy/scipy; docs/sequences.md gives the equations.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from scgen.errors import ScgenError
+from scgen.scenes.camera_config import CameraSettings
+from scgen.scenes.checks import check_range, is_number
+from scgen.scenes.finish import sample_finish
+from scgen.scenes.imaging import sample_imaging
+from scgen.scenes.orbit import (
+    NADIR_LVLH,
+    PROFILES,
+    Orbit,
+    draw_orbit,
+    draw_profile,
+    draw_sun,
+    earth_angular_radius,
+    in_eclipse,
+    lvlh_to_inertial,
+    sun_direction_lvlh,
+)
+from scgen.scenes.rng import sequence_rng
+from scgen.scenes.silhouette import TargetShape
+from scgen.scenes.sky import celestial_frame, sky_background
+from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, SceneSpec, SequenceFrame, SunSpec
+from scgen.scenes.tumble import ATTITUDE_MODES, MassProperties, attitude_track, draw_attitude
+
+EARTH_ROTATION_RAD_S = 7.2921159e-5  # the Earth's sidereal spin rate (IERS), turning its map under the orbit
+POINTING_MODES = ("target", "fixed")
+SUNLIT = "normal"  # the illumination level of a sunlit frame: the sun's true irradiance
+ECLIPSED = "eclipse"  # the level of a frame in the Earth's shadow: no sunlight
+
+# The `[sequence]` table (docs/config.md#sequence): absent from a config without sequences, so an
+# independent-frame dataset's config, and with it every byte it writes, is what it was.
+DEFAULT_SEQUENCE: dict[str, Any] = {
+    "frames": 10,  # frames per sequence (each sequence is one BOP scene)
+    "dt_s": 1.0,  # s between frames
+    "spacecraft_diameter_m": 3.0,  # the real target's diameter (m): profile metres x model diameter / this
+    "altitude_km": [400.0, 800.0],  # circular orbit, altitude uniform over this range
+    "max_beta_deg": 90.0,  # the sun's elevation over the orbit plane, uniform over the band |beta| <= this
+    "profile_probs": {name: 1.0 / len(PROFILES) for name in PROFILES},  # scgen.scenes.orbit.PROFILES
+    "profiles": {},  # per profile, its ranges overriding DEFAULT_PROFILE_RANGES[profile]
+    "attitude_probs": {mode: 1.0 / len(ATTITUDE_MODES) for mode in ATTITUDE_MODES},
+    "rate_deg": [0.5, 5.0],  # deg/s, spin and tumble rates
+    "pointing": "target",  # target: the camera tracks the target; fixed: held in LVLH from frame 0
+    "pointing_error_deg": 1.0,  # the boresight off the target by a constant angle uniform in [0, this]
+    "roll_deg": [-180.0, 180.0],  # the camera's roll about the boresight at frame 0
+}
+
+
+def is_sequence(cfg: dict[str, Any]) -> bool:
+    """Whether a resolved config renders sequences (it has a `sequence` table)."""
+    return cfg.get("sequence") is not None
+
+
+def merge_sequence(table: Any) -> dict[str, Any]:
+    """DEFAULT_SEQUENCE overridden by a config file's `[sequence]` table: known keys only, each of its
+    default's kind; `profile_probs` and `attitude_probs` replace the default map whole (a name left out
+    has share 0), `profiles` maps a profile to its range overrides."""
+    if not isinstance(table, dict):
+        raise ScgenError("config key 'sequence' must be a table")
+    out = copy.deepcopy(DEFAULT_SEQUENCE)
+    for key, value in table.items():
+        if key not in out:
+            raise ScgenError(f"unknown config key 'sequence.{key}'; known: {', '.join(DEFAULT_SEQUENCE)}")
+        default = out[key]
+        if isinstance(default, dict) and not isinstance(value, dict):
+            raise ScgenError(f"config key 'sequence.{key}' must be a table")
+        if isinstance(default, list) and not isinstance(value, list):
+            raise ScgenError(f"config key 'sequence.{key}' must be a list")
+        if isinstance(default, str) and not isinstance(value, str):
+            raise ScgenError(f"config key 'sequence.{key}' must be a string, got {value!r}")
+        if isinstance(default, (int, float)) and (isinstance(value, bool) or not is_number(value)):
+            raise ScgenError(f"config key 'sequence.{key}' must be a number, got {value!r}")
+        out[key] = copy.deepcopy(value)
+    return out
+
+
+def check_sequence(seq: dict[str, Any]) -> None:
+    """Every value of a merged `sequence` table in range, each profile's ranges drawable."""
+    if not isinstance(seq["frames"], int) or seq["frames"] <= 0:
+        raise ScgenError(f"sequence.frames must be a positive integer, got {seq['frames']!r}")
+    for key in ("dt_s", "spacecraft_diameter_m"):
+        if not seq[key] > 0:
+            raise ScgenError(f"sequence.{key} must be positive, got {seq[key]}")
+    check_range("sequence.altitude_km", seq["altitude_km"], low=1.0)
+    check_range("sequence.rate_deg", seq["rate_deg"], low=0.0)
+    check_range("sequence.roll_deg", seq["roll_deg"], low=-360.0)
+    if not 0.0 <= seq["max_beta_deg"] <= 90.0:
+        raise ScgenError(f"sequence.max_beta_deg must lie in [0, 90], got {seq['max_beta_deg']}")
+    if not 0.0 <= seq["pointing_error_deg"] < 90.0:
+        raise ScgenError(f"sequence.pointing_error_deg must lie in [0, 90), got {seq['pointing_error_deg']}")
+    if seq["pointing"] not in POINTING_MODES:
+        raise ScgenError(
+            f"sequence.pointing must be one of {', '.join(POINTING_MODES)}, got {seq['pointing']!r}"
+        )
+    for key, names in (("profile_probs", PROFILES), ("attitude_probs", ATTITUDE_MODES)):
+        probs = seq[key]
+        unknown = sorted(set(probs) - set(names))
+        if unknown:
+            raise ScgenError(f"sequence.{key}: unknown {', '.join(unknown)}; choose from {', '.join(names)}")
+        if not all(is_number(p) and p >= 0 for p in probs.values()) or not sum(probs.values()) > 0:
+            raise ScgenError(f"sequence.{key} must give non-negative shares, not all 0, got {probs}")
+    unknown = sorted(set(seq["profiles"]) - set(PROFILES))
+    if unknown:
+        raise ScgenError(
+            f"sequence.profiles: unknown profile {', '.join(unknown)}; choose from {', '.join(PROFILES)}"
+        )
+    for name, ranges in seq["profiles"].items():
+        if not isinstance(ranges, dict):
+            raise ScgenError(f"sequence.profiles.{name} must be a table of ranges")
+        draw_profile(name, np.random.default_rng(0), ranges)  # names an unknown key or a bad range
+
+
+def _choice(rng: np.random.Generator, probs: dict[str, float]) -> str:
+    names = list(probs)
+    p = np.array([probs[n] for n in names], dtype=float)
+    return names[int(rng.choice(len(names), p=p / p.sum()))]
+
+
+# ---------------------------------------------------------------------------------------------------------
+# the camera's pointing
+
+
+def look_basis(d: np.ndarray, roll: float) -> np.ndarray:
+    """A camera (OpenCV axes) looking along unit d (LVLH), rolled by `roll` (rad) about it from the camera
+    whose image 'up' is towards zenith (+R-bar; the orbit normal when d is within 8 deg of R-bar):
+    R_LC, its columns the camera's x, y, z in LVLH."""
+    up = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.99 else np.array([0.0, 0.0, 1.0])
+    x = np.cross(d, up)
+    x /= np.linalg.norm(x)
+    y = np.cross(d, x)
+    c, s = math.cos(roll), math.sin(roll)
+    return np.stack([c * x + s * y, -s * x + c * y, d], axis=1)
+
+
+def minimal_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking unit a onto unit b (about a x b)."""
+    axis = np.cross(a, b)
+    s, c = np.linalg.norm(axis), float(np.dot(a, b))
+    if s < 1e-15:
+        return np.eye(3)
+    return Rotation.from_rotvec(axis / s * math.atan2(s, c)).as_matrix()
+
+
+def track_pointing(d: np.ndarray, R0: np.ndarray) -> np.ndarray:
+    """R_LC at each frame of a camera that keeps its boresight on the directions d (T, 3) turning by the
+    smallest rotation from each frame to the next (no roll about the boresight: parallel transport)."""
+    out = np.empty((len(d), 3, 3))
+    out[0] = R0
+    for k in range(1, len(d)):
+        out[k] = minimal_rotation(d[k - 1], d[k]) @ out[k - 1]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------
+# a sequence
+
+
+@dataclass(frozen=True)
+class SequenceDraw:
+    """What sequence s of a seed drew: the orbit's altitude, the profile, the attitude motion, the sun,
+    the pointing (roll at frame 0; pointing error as a rotation of the camera, camera axes) and the sky."""
+
+    altitude_m: float
+    profile: Any  # an scgen.scenes.orbit profile
+    attitude: Any  # scgen.scenes.tumble.AttitudeMotion
+    sun: Any  # scgen.scenes.orbit.Sun
+    roll_rad: float
+    error: np.ndarray  # 3x3, camera (pointing at the target) -> camera (as it points)
+    sky_longitude: float  # the sun's ecliptic longitude (a date) and the sky's roll about it (rad)
+    sky_roll: float
+    earth_spin_deg: float  # the Earth's sidereal angle at t = 0
+
+
+def draw_sequence(seed: int, sequence: int, seq: dict[str, Any], props: MassProperties) -> SequenceDraw:
+    """Sequence `sequence`'s draws, each from its own stream."""
+    orbit = draw_orbit(sequence_rng(seed, sequence, "orbit"), tuple(seq["altitude_km"]))
+    rng = sequence_rng(seed, sequence, "profile")
+    name = _choice(rng, seq["profile_probs"])
+    profile = draw_profile(name, rng, seq["profiles"].get(name))
+    rng = sequence_rng(seed, sequence, "attitude")
+    attitude = draw_attitude(_choice(rng, seq["attitude_probs"]), rng, props, tuple(seq["rate_deg"]))
+    sun = draw_sun(sequence_rng(seed, sequence, "sun"), seq["max_beta_deg"])
+    rng = sequence_rng(seed, sequence, "pointing")
+    roll = math.radians(rng.uniform(*seq["roll_deg"]))
+    off = math.radians(rng.uniform(0.0, seq["pointing_error_deg"]))
+    az = rng.uniform(0.0, 2.0 * math.pi)
+    error = Rotation.from_rotvec(off * np.array([math.sin(az), -math.cos(az), 0.0])).as_matrix()
+    lam, sky_roll, spin = sequence_rng(seed, sequence, "sky").uniform(0.0, 2.0 * math.pi, 3)
+    return SequenceDraw(orbit.altitude_m, profile, attitude, sun, roll, error, lam, sky_roll,
+                        math.degrees(spin))  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Track:
+    """A sequence's geometry at each frame time, in the camera frame (model-frame metres): the target's
+    pose (R, t), their rates (dt/dt, angular velocity, camera axes), R_LC, the sun, the Earth's centre
+    direction, the eclipse flag, the range (real metres), and R_CI (inertial -> camera)."""
+
+    t_s: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    velocity: np.ndarray
+    omega: np.ndarray
+    R_lc: np.ndarray
+    sun: np.ndarray
+    nadir: np.ndarray
+    eclipse: np.ndarray
+    range_m: np.ndarray
+    R_ci: np.ndarray
+
+
+def sequence_track(
+    draw: SequenceDraw, times: np.ndarray, scale: float, props: MassProperties, pointing: str
+) -> Track:
+    """The relative geometry of a drawn sequence at `times` (s, from 0), with positions and velocities of
+    the real spacecraft scaled by `scale` (model diameter / spacecraft diameter; HCW is linear).
+
+    The camera sits at the chaser, its boresight on the target's centre of mass (then turned by the
+    pointing error) and carried frame to frame without roll (pointing 'target'), or held in LVLH as it
+    was at frame 0 (pointing 'fixed'). With R_LC the camera's attitude in LVLH, R_LB the target's, c its
+    centre of mass (model frame) and r the chaser's position (LVLH):
+
+        R = R_LC^T R_LB,   t = R_LC^T (-s r) - R c,
+        w = R_LC^T (R_LB w_body - n z - w_CL),   dt/dt = R_LC^T (-s v + w_CL x s r) - w x (R c)
+
+    where w_CL = d x d' is the tracking camera's rate in LVLH (d = -r/|r|; 0 when fixed) and n z LVLH's
+    rate about the orbit normal.
+    """
+    orbit = Orbit(draw.altitude_m)
+    a, n = orbit.a, orbit.n
+    r, v = draw.profile.state(n, times)
+    rho = np.linalg.norm(r, axis=-1)
+    if np.any(rho <= 0):
+        raise ScgenError(f"the {draw.profile.name} profile puts the chaser on the target")
+    d = -r / rho[:, None]
+    R0 = look_basis(d[0], draw.roll_rad)
+    if pointing == "target":
+        R_lc = track_pointing(d, R0) @ draw.error
+        d_dot = -(v - d * np.sum(d * v, axis=-1, keepdims=True)) / rho[:, None]
+        w_cl = np.cross(d, d_dot)
+    else:
+        R_lc = np.repeat((R0 @ draw.error)[None], len(times), 0)
+        w_cl = np.zeros_like(r)
+    R_cl = np.swapaxes(R_lc, -1, -2)
+    att = attitude_track(draw.attitude, n, times, props)
+    R = R_cl @ att.R_lb
+    com = np.einsum("kij,kj->ki", R_cl, -scale * r)
+    Rc = R @ props.centre_of_mass
+    t = com - Rc
+    w_l = np.einsum("kij,kj->ki", att.R_lb, att.omega_body) - np.array([0.0, 0.0, n]) - w_cl
+    omega = np.einsum("kij,kj->ki", R_cl, w_l)
+    velocity = np.einsum("kij,kj->ki", R_cl, -scale * v + np.cross(w_cl, scale * r)) - np.cross(omega, Rc)
+    sun_l = sun_direction_lvlh(draw.sun, n, times)
+    R_ci = R_cl @ np.swapaxes(lvlh_to_inertial(n, times), -1, -2)
+    return Track(times, R, t, velocity, omega, R_lc, np.einsum("kij,kj->ki", R_cl, sun_l),
+                 R_cl @ NADIR_LVLH, in_eclipse(sun_l, a), rho, R_ci)  # fmt: skip
+
+
+def motion_blur(
+    camera: CameraSpec, t: np.ndarray, velocity: np.ndarray, exposure_s: float
+) -> tuple[float, float]:
+    """(length px, direction deg in [0, 180)) of the target centre's image motion during the exposure:
+    d(u, v)/dt = f (x' z - x z') / z^2 (pinhole) times the exposure time."""
+    x, y, z = t
+    vx, vy, vz = velocity
+    K = camera.K_mat
+    du = K[0, 0] * (vx * z - x * vz) / z**2 * exposure_s
+    dv = K[1, 1] * (vy * z - y * vz) / z**2 * exposure_s
+    return float(math.hypot(du, dv)), float(math.degrees(math.atan2(dv, du)) % 180.0)
+
+
+def sample_sequence(
+    seed: int, sequence: int, cfg: dict[str, Any], shape: TargetShape, props: MassProperties
+) -> list[SceneSpec]:
+    """The SceneSpecs of every frame of sequence `sequence` of `seed`; frame k has sample index
+    sequence * frames + k. Depends only on (seed, sequence, cfg, target geometry)."""
+    seq = cfg["sequence"]
+    frames = seq["frames"]
+    draw = draw_sequence(seed, sequence, seq, props)
+    times = np.arange(frames) * float(seq["dt_s"])
+    track = sequence_track(draw, times, shape.diameter / seq["spacecraft_diameter_m"], props, seq["pointing"])
+    camera = CameraSpec.from_config(cfg["camera"])
+    settings = CameraSettings.from_table(cfg["camera"])
+    imaging = sample_imaging(sequence_rng(seed, sequence, "camera"), settings)
+    blur = settings.optics.motion_blur_prob > 0  # the camera models motion blur: the true motion's
+    finish = sample_finish(sequence_rng(seed, sequence, "finish"), cfg["finish"])
+    bg_cfg = cfg["background"]
+    bg_seed = int(sequence_rng(seed, sequence, "background").integers(2**31))
+    ill = cfg["illumination"]
+    rho_earth = earth_angular_radius(Orbit(draw.altitude_m).a)
+    K = camera.K_mat
+    half_diag = math.atan(math.hypot(0.5 * camera.width / K[0, 0], 0.5 * camera.height / K[1, 1]))
+    icrs_to_i = celestial_frame(draw.sun.inertial(), draw.sky_longitude, draw.sky_roll)
+    specs = []
+    for k in range(frames):
+        index = sequence * frames + k
+        eclipse = bool(track.eclipse[k])
+        nadir = track.nadir[k]
+        kind = "earth" if math.acos(np.clip(nadir[2], -1.0, 1.0)) < rho_earth + half_diag else "clean"
+        params: dict[str, Any] = {}
+        if kind == "earth":
+            params = {"centre_dir": [float(c) for c in nadir], "angular_radius_deg": math.degrees(rho_earth),
+                      "albedo": float(bg_cfg["earth_albedo"]), "limb": True}  # fmt: skip
+        spin_deg = (draw.earth_spin_deg + math.degrees(EARTH_ROTATION_RAD_S * times[k])) % 360.0
+        sky = {
+            "sky_frame": [float(x) for x in (track.R_ci[k] @ icrs_to_i).ravel()],
+            "earth_spin_deg": spin_deg,
+        }
+        params.update(sky_background(kind, bg_cfg, sky))
+        level = ECLIPSED if eclipse else SUNLIT
+        irradiance = 0.0 if eclipse else ill["solar_irradiance"] * ill["multipliers"][SUNLIT]
+        frame_imaging = imaging
+        if blur:
+            exposure_s = settings.sensor.exposure_time_s
+            length, angle = motion_blur(camera, track.t[k], track.velocity[k], exposure_s)
+            frame_imaging = replace(imaging, motion_blur_px=length, motion_blur_deg=angle)
+        t = track.t[k]
+        specs.append(
+            SceneSpec(
+                seed=int(seed),
+                index=int(index),
+                camera=camera,
+                target=Pose.from_arrays(track.R[k], t),
+                distance_m=float(np.linalg.norm(t)),
+                sun=SunSpec(tuple(float(x) for x in track.sun[k]), level, float(irradiance)),
+                background=BackgroundSpec(kind, bg_seed, params),
+                props=(),
+                requested_occlusion="none",
+                shadow_caster=False,
+                imaging=frame_imaging,
+                finish=finish,
+                sequence=SequenceFrame(
+                    sequence=int(sequence),
+                    frame=k,
+                    time_s=float(times[k]),
+                    velocity=tuple(float(x) for x in track.velocity[k]),
+                    angular_velocity=tuple(float(x) for x in track.omega[k]),
+                    eclipse=eclipse,
+                    profile=draw.profile.name,
+                    attitude=draw.attitude.mode,
+                    range_m=float(track.range_m[k]),
+                    altitude_km=draw.altitude_m / 1e3,
+                ),
+            )  # fmt: skip
+        )
+    return specs

@@ -1,0 +1,172 @@
+"""Rendezvous sequences as rendered frames: the labelled poses move as the labelled rates say, a surface
+point's xyz label lands where that motion takes it, whole sequences go to one split, and a sequence render
+validates with both backends (the physics of the trajectories themselves: test_orbit_dynamics.py)."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from scipy.spatial.transform import Rotation
+
+from scgen import Generator
+from scgen.cli import main
+from scgen.errors import ScgenError
+from scgen.scenes import load_config
+from scgen.scenes.orbit import PROFILES
+from scgen.scenes.tumble import ATTITUDE_MODES
+
+
+def sequence_generator(**sequence: Any) -> Generator:
+    """The bundled target, 160x120, with a `[sequence]` table of these keys."""
+    return Generator.load(overrides={"sequence": sequence}, resolution=(160, 120), backend="mitsuba",
+                          quality="draft")  # fmt: skip
+
+
+@pytest.mark.parametrize("pointing", ["target", "fixed"])
+@pytest.mark.parametrize("profile", list(PROFILES))
+def test_consecutive_poses_differ_by_the_labelled_motion(profile: str, pointing: str):
+    """Between frames dt apart, t moves by the trapezoid of its labelled rate and R turns by the rotation of
+    the mean labelled angular velocity (dR/dt = [w]x R), for every profile and attitude mode."""
+    dt = 0.5
+    gen = sequence_generator(frames=20, dt_s=dt, profile_probs={profile: 1.0}, pointing=pointing,
+                             rate_deg=[3.0, 5.0])  # fmt: skip
+    seen = set()
+    for s in range(12):
+        specs = gen.sequence(s)
+        seen.add(specs[0].sequence.attitude)
+        t = np.array([sp.target.t for sp in specs])
+        R = np.array([sp.target.R_mat for sp in specs])
+        v = np.array([sp.sequence.velocity for sp in specs])
+        w = np.array([sp.sequence.angular_velocity for sp in specs])
+        assert [sp.sequence.frame for sp in specs] == list(range(20))
+        assert {sp.index // 20 for sp in specs} == {s}
+        # the trapezoid's error is dt^3/12 |t'''|: at 5 deg/s and the profiles' speeds, < 1e-7 m of a
+        # 0.2 m model (measured 7.7e-8 at most); a wrong sign or frame gives ~dt |v|, 1e-4 to 1e-2 m
+        moved = t[1:] - t[:-1] - dt * 0.5 * (v[1:] + v[:-1])
+        assert np.abs(moved).max() < 1e-6 + 1e-4 * dt * np.abs(v).max()
+        turned = Rotation.from_matrix(R[1:] @ np.swapaxes(R[:-1], 1, 2)).as_rotvec()
+        # the mean rate's error is O(dt^3 |w'| |w|): < 1e-6 rad at these rates (measured 7.0e-7 at most),
+        # the tracking camera's discrete transport adding a roll of the same order; leaving out LVLH's
+        # turn (n ~ 1.1e-3 rad/s) or the camera's would miss by > 5e-4 rad
+        assert np.abs(turned - dt * 0.5 * (w[1:] + w[:-1])).max() < 2e-5
+    assert seen == set(ATTITUDE_MODES)  # 12 sequences draw all four modes (a fixed seed: checked here)
+
+
+def test_a_frame_is_the_same_whatever_frames_are_asked():
+    """Frame k of sequence s from a fresh generator, asked alone, equals the one of a pass over all."""
+    gen = sequence_generator(frames=6, dt_s=4.0, attitude_probs={"tumble": 1.0})
+    every = [gen.scene(i).to_dict() for i in range(18)]
+    assert (
+        sequence_generator(frames=6, dt_s=4.0, attitude_probs={"tumble": 1.0}).scene(15).to_dict()
+        == every[15]
+    )
+    assert every[6]["sequence"]["sequence"] == 1 and every[6]["sequence"]["frame"] == 0
+
+
+def test_xyz_label_of_a_surface_point_projects_where_the_motion_says():
+    """A visible surface point of frame 0 (its xyz label X), moved dt by the labelled rates, projects to
+    a pixel of frame 1 whose xyz label is X again (within the pixel's footprint on the target)."""
+    dt = 6.0
+    hold = {"vbar_hold": {"distance_m": [4.0, 4.5]}}
+    gen = sequence_generator(frames=2, dt_s=dt, profile_probs={"vbar_hold": 1.0}, profiles=hold,
+                             attitude_probs={"tumble": 1.0}, rate_deg=[4.0, 5.0], spacecraft_diameter_m=2.0,
+                             pointing_error_deg=0.0)  # fmt: skip
+    with gen:
+        a, b = gen.sample(0), gen.sample(1)
+    K = a.spec.camera.K_mat
+    va, vb = a.annotation.mask_visib, b.annotation.mask_visib
+    assert va.sum() > 300 and vb.sum() > 300  # the target fills a good part of the 160x120 frame
+    fa, fb = a.spec.sequence, b.spec.sequence
+    w = 0.5 * (np.array(fa.angular_velocity) + np.array(fb.angular_velocity))
+    v = 0.5 * (np.array(fa.velocity) + np.array(fb.velocity))
+    turn = Rotation.from_rotvec(dt * w).as_matrix()
+    Ra, ta = a.spec.target.R_mat, a.spec.target.t_vec
+    rows, cols = np.nonzero(va)
+    X = a.annotation.xyz[rows, cols]  # model frame
+    Xa = X @ Ra.T + ta
+    Xb = (Xa - ta) @ turn.T + ta + dt * v  # rigid motion about the model origin, by the labelled rates
+    uv = Xb @ K.T
+    u, vv = np.round(uv[:, 0] / uv[:, 2]).astype(int), np.round(uv[:, 1] / uv[:, 2]).astype(int)
+    inside = (u >= 0) & (u < vb.shape[1]) & (vv >= 0) & (vv < vb.shape[0])
+    hit = inside.copy()
+    hit[inside] = vb[vv[inside], u[inside]]
+    assert hit.mean() > 0.8  # the rest: turned out of view, or behind another part
+    err = np.linalg.norm(b.annotation.xyz[vv[hit], u[hit]] - X[hit], axis=1)
+    footprint = Xb[hit, 2] / K[0, 0]  # a pixel's size on a surface facing the camera (m)
+    # rounding to the nearest pixel moves <= 0.71 px; oblique surfaces stretch a pixel: the median tests
+    # (measured 0.59, against 5.5 for the point's own pixel in frame 1; 94 % of the points hit)
+    assert np.median(err / footprint) < 1.5
+    # the motion is real: the points moved by pixels, so the same pixel of frame 1 holds another point
+    moved_px = np.hypot(uv[:, 0] / uv[:, 2] - cols, uv[:, 1] / uv[:, 2] - rows)
+    assert np.median(moved_px) > 2.0
+    assert (
+        np.median(np.linalg.norm(b.annotation.xyz[rows[hit], cols[hit]] - X[hit], axis=1) / footprint) > 2.0
+    )
+
+
+def _rows(root: Path) -> list[dict[str, str]]:
+    with open(root / "metadata.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def render_sequences(out: Path, backend: str, n: int, frames: int, *extra: str) -> None:
+    config = out.parent / f"{out.name}.toml"
+    config.write_text(f"[sequence]\nframes = {frames}\ndt_s = 3.0\nspacecraft_diameter_m = 2.0\n")
+    args = ["render", "--n", str(n), "--out", str(out), "--config", str(config), "--backend", backend,
+            "--resolution", "64x48", "--quality", "draft", "--workers", "1", "--quiet", *extra]  # fmt: skip
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+
+
+def test_whole_sequences_go_to_one_split_and_are_bop_scenes(tmp_path: Path):
+    """Each sequence is one BOP scene (scene_id = sequence id) in one split, its frames consecutive ids;
+    the split is planned over sequences, so no sequence has frames in two splits."""
+    gen = sequence_generator(frames=4, dt_s=1.0)
+    from scgen.run.runner import RenderJob, make_plan
+
+    for split_by in ("factors", "random"):
+        plan = make_plan(RenderJob(out=tmp_path / "x", n=40, seed=5, backend="mitsuba", split_by=split_by,
+                                   overrides={"sequence": {"frames": 4, "dt_s": 1.0}}))  # fmt: skip
+        by_sequence: dict[int, set[str]] = {}
+        for spec, split in zip(plan.specs, plan.splits, strict=True):
+            by_sequence.setdefault(spec.sequence.sequence, set()).add(split)
+        assert len(by_sequence) == 40 and all(len(s) == 1 for s in by_sequence.values())
+        assert {s for ss in by_sequence.values() for s in ss} == {"train", "val", "test"}
+    assert gen.frames == 4
+    out = tmp_path / "mitsuba"
+    render_sequences(out, "mitsuba", 3, 2, "--split", "0.34,0.33,0.33", "--split-by", "random")
+    rows = _rows(out)
+    assert [int(r["sample_id"]) for r in rows] == list(range(6))
+    for r in rows:
+        assert int(r["scene_id"]) == int(r["sequence_id"]) == int(r["sample_id"]) // 2
+        assert int(r["frame"]) == int(r["sample_id"]) % 2 and float(r["time_s"]) == 3.0 * int(r["frame"])
+        scene = out / r["split"] / f"{int(r['scene_id']):06d}"
+        assert (scene / "scene_gt.json").is_file()
+    assert len({(r["sequence_id"], r["split"]) for r in rows}) == 3
+
+
+@pytest.mark.parametrize("backend", ["mitsuba", "blender"])
+def test_a_sequence_render_validates(tmp_path: Path, backend: str):
+    """`scgen validate` passes on 2 sequences x 3 frames (64x48, draft)."""
+    out = tmp_path / backend
+    render_sequences(out, backend, 2, 3)
+    result = CliRunner().invoke(main, ["validate", str(out), "--quiet", "--workers", "1"])
+    assert result.exit_code == 0, result.output
+    rows = _rows(out)
+    assert len(rows) == 6 and {r["sequence_id"] for r in rows} == {"0", "1"}
+
+
+def test_independent_configs_have_no_sequence_table_and_bad_keys_are_named():
+    """Without a [sequence] table the resolved config holds none (the bytes of every existing seed stay);
+    a bad sequence key is named."""
+    assert "sequence" not in load_config()
+    for table, words in (({"frame": 3}, "sequence.frame"), ({"pointing": "sun"}, "sequence.pointing"),
+                         ({"profile_probs": {"hover": 1.0}}, "hover"),
+                         ({"profiles": {"flyby": {"speed": [1, 2]}}}, "speed")):  # fmt: skip
+        with pytest.raises(ScgenError, match=words):
+            load_config(overrides={"sequence": table})
