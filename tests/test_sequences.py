@@ -170,3 +170,17 @@ def test_independent_configs_have_no_sequence_table_and_bad_keys_are_named():
                          ({"profiles": {"flyby": {"speed": [1, 2]}}}, "speed")):  # fmt: skip
         with pytest.raises(ScgenError, match=words):
             load_config(overrides={"sequence": table})
+
+
+def test_the_example_config_gives_the_sequences_its_docs_say():
+    """examples/rendezvous.toml (the docs' runnable example): 60 frames 5 s apart, its approaches closing."""
+    gen = Generator.load(config=Path(__file__).parents[1] / "examples" / "rendezvous.toml")
+    assert gen.frames == 60
+    specs = gen.sequence(0)
+    assert [s.sequence.time_s for s in specs[:3]] == [0.0, 5.0, 10.0]
+    approaches = [
+        f for f in (gen.sequence(s) for s in range(6)) if f[0].sequence.profile == "corridor_approach"
+    ]
+    assert approaches  # 40 % of the sequences: seed 0 draws 4 of 6
+    for frames in approaches:
+        assert frames[-1].sequence.range_m < frames[0].sequence.range_m
