@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from scgen import Generator
 from scgen.cli import main
+from scgen.dataset.validate import check_sequences
 from scgen.errors import ScgenError
 from scgen.scenes import load_config
 from scgen.scenes.orbit import PROFILES
@@ -159,6 +160,27 @@ def test_a_sequence_render_validates(tmp_path: Path, backend: str):
     assert result.exit_code == 0, result.output
     rows = _rows(out)
     assert len(rows) == 6 and {r["sequence_id"] for r in rows} == {"0", "1"}
+    result = CliRunner().invoke(main, ["stats", str(out)])
+    assert result.exit_code == 0, result.output
+    assert sum(f"{s}: 1 sequences, 3 frames" in result.output for s in ("train", "val", "test")) == 2
+
+
+def test_validate_names_a_sequence_in_two_splits_and_a_misplaced_frame():
+    """check_sequences reads metadata.csv's rows: a sequence with frames in two splits, a frame whose
+    sequence, scene or time is not the one its id gives."""
+    rows = [{"sample_id": str(i), "sequence_id": str(i // 3), "scene_id": str(i // 3), "frame": str(i % 3),
+             "time_s": repr(2.0 * (i % 3)), "split": "train"} for i in range(6)]  # fmt: skip
+    sequence = {"count": 2, "frames": 3, "dt_s": 2.0}
+    assert check_sequences(rows, sequence) == []
+    rows[4]["split"] = "test"
+    rows[2]["scene_id"] = "1"
+    rows[5]["time_s"] = "4.5"
+    problems = check_sequences(rows, sequence)
+    assert problems == [
+        "sample 2: sequence 0, frame 2, scene 1; its id gives sequence and scene 0, frame 2",
+        "sample 5: time_s 4.5 is not frame 2 x dt 2.0",
+        "sequence 1: frames in test, train",
+    ]
 
 
 def test_independent_configs_have_no_sequence_table_and_bad_keys_are_named():

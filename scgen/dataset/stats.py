@@ -53,7 +53,30 @@ def compute_stats(root: str | Path, split: str | None = None, min_group: int = 5
             "distance_edges_m": edges,
             "below_min": [f"{f}/{g}" for f, gs in factors.items() for g, c in gs.items() if c < min_group],
         }
+        if rows and "sequence_id" in rows[0]:
+            out["splits"][name]["sequences"] = sequence_counts(rows)
     return out
+
+
+SEQUENCE_GROUPS = ("profile", "attitude_mode")  # a sequence dataset's per-sequence factors (metadata.csv)
+
+
+def sequence_counts(rows: list[dict[str, str]]) -> dict[str, Any]:
+    """A sequence dataset's split by whole sequences: how many, their frames, the sequences of each
+    profile and attitude mode, and the share of frames in eclipse."""
+    first: dict[str, dict[str, str]] = {}
+    for r in rows:
+        first.setdefault(r["sequence_id"], r)
+    seqs = list(first.values())
+    return {
+        "n": len(seqs),
+        "frames": len(rows),
+        **{
+            g: {v: [r[g] for r in seqs].count(v) for v in sorted({r[g] for r in seqs})}
+            for g in SEQUENCE_GROUPS
+        },
+        "eclipse_share": sum(r["eclipse"] == "1" for r in rows) / len(rows),
+    }
 
 
 def format_table(stats: dict[str, Any]) -> str:
@@ -73,7 +96,20 @@ def format_table(stats: dict[str, Any]) -> str:
             lines.append(cells)
     widths = [max(len(row[i]) for row in lines) for i in range(len(header))]
     text = "\n".join("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in lines)
-    return text + f"\n* fewer than {stats['min_group']} samples: not eligible for group-wise evaluation"
+    text += f"\n* fewer than {stats['min_group']} samples: not eligible for group-wise evaluation"
+    return text + format_sequences(stats)
+
+
+def format_sequences(stats: dict[str, Any]) -> str:
+    """The per-sequence lines of a sequence dataset's stats (empty for independent samples)."""
+    lines = []
+    for name, st in stats["splits"].items():
+        if "sequences" in st:
+            q = st["sequences"]
+            groups = "; ".join(", ".join(f"{v} {c}" for v, c in q[g].items()) for g in SEQUENCE_GROUPS)
+            lines.append(f"{name}: {q['n']} sequences, {q['frames']} frames ({groups}); "
+                         f"{q['eclipse_share']:.0%} of the frames in eclipse")  # fmt: skip
+    return "\n" + "\n".join(lines) if lines else ""
 
 
 def to_csv(stats: dict[str, Any]) -> str:

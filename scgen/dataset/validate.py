@@ -36,9 +36,12 @@ def validate_dataset(root: str | Path, progress: bool = True, workers: int = 1) 
     """
     if not Layout(root).manifest_path.is_file() and is_bop_dataset(Path(root)):
         return validate_bop_dataset(root, progress)  # a BOP dataset scgen did not render
-    layout, _ = open_dataset(root)
+    layout, manifest = open_dataset(root)
     problems = check_models(layout)
-    rows = {int(r["sample_id"]) for r in read_metadata(root)}
+    table = read_metadata(root)
+    rows = {int(r["sample_id"]) for r in table}
+    if manifest.get("sequence"):
+        problems += check_sequences(table, manifest["sequence"])
     splits = read_json(layout.splits_path)["splits"]
     split_of = {i: s for s, ids in splits.items() for i in ids}
     by_scene: dict[Path, list[Path]] = defaultdict(list)
@@ -66,6 +69,25 @@ def validate_dataset(root: str | Path, progress: bool = True, workers: int = 1) 
             bar.update(len(seen))
     problems += check_test_targets(layout, sorted(images, key=lambda image: image[1]))
     return problems, n
+
+
+def check_sequences(rows: list[dict[str, str]], sequence: dict[str, Any]) -> list[str]:
+    """A sequence dataset's frames (metadata.csv): frame k of sequence s is sample s * frames + k, in BOP
+    scene s, at time k * dt; every frame of a sequence in one split."""
+    frames, dt = int(sequence["frames"]), float(sequence["dt_s"])
+    out, splits = [], defaultdict(set)
+    for r in rows:
+        sid, seq, k = int(r["sample_id"]), int(r["sequence_id"]), int(r["frame"])
+        splits[seq].add(r["split"])
+        if (seq, k) != divmod(sid, frames) or int(r["scene_id"]) != seq:
+            out.append(f"sample {sid}: sequence {seq}, frame {k}, scene {r['scene_id']}; its id gives "
+                       f"sequence and scene {sid // frames}, frame {sid % frames}")  # fmt: skip
+        if abs(float(r["time_s"]) - k * dt) > 1e-9 * max(1.0, k * dt):
+            out.append(f"sample {sid}: time_s {r['time_s']} is not frame {k} x dt {dt}")
+    out += [
+        f"sequence {s}: frames in {', '.join(sorted(sp))}" for s, sp in sorted(splits.items()) if len(sp) > 1
+    ]
+    return out
 
 
 def check_scene(
