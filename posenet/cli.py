@@ -14,12 +14,13 @@ from tqdm import tqdm
 
 from posenet.amp import AMP_MODES
 from posenet.bench import PAPER, device_label, format_report, resolve_device, run_bench
-from posenet.config import load_config
+from posenet.checkpoint import load_checkpoint
+from posenet.config import config_from_dict, load_config
 from posenet.data.boxes import boxes_from_gt
 from posenet.data.layout import scan_split
 from posenet.detection.detect import detect_split, detection_entries
 from posenet.detection.detector import load_detector_config
-from posenet.detection.train import train_detector
+from posenet.detection.train import BEST, train_detector
 from posenet.errors import PosenetError
 from posenet.evaluate import (
     BATCH_SIZE,
@@ -40,7 +41,7 @@ from posenet.ransac import PNP_LABELS, PNP_METHODS
 from posenet.train import train as run_train
 from posenet.viz import heatmap_panel, overlay_panel
 from scgen.cli import one_line_errors, preset_intrinsics
-from scgen.io import ScgenError, atomic_write_text, check_output, make_output_folder
+from scgen.io import ScgenError, check_output, make_output_folder, write_output
 
 PATH = click.Path(path_type=Path)
 
@@ -151,6 +152,7 @@ def train(
     show_default=True,
     help="Pose solver: the network's Patch-PnP, OpenCV's PnP-RANSAC on its predicted xyz and mask, or both.",
 )
+@click.option("--overwrite", is_flag=True, help="Replace an existing --json, --predictions or --bop-csv.")
 @one_line_errors(PosenetError, ScgenError)
 def eval_cmd(
     data: Path,
@@ -165,6 +167,7 @@ def eval_cmd(
     obj_id: int | None,
     bop_csv: Path | None,
     pnp: str,
+    overwrite: bool,
 ) -> None:
     """Rotation/translation error, ADD@0.02 m, ADD@0.1d (and what the rotation and the translation each
     score alone), ADD-S@0.1d, MSSD, ESA score and batch-1 latency.
@@ -176,17 +179,28 @@ def eval_cmd(
     methods = PNP_METHODS if pnp == "both" else (pnp,)
     if bop_csv is not None and len(methods) > 1:
         raise PosenetError("--bop-csv writes the estimates of one PnP method: --pnp patch or --pnp ransac")
+    if by_factor is not None and (bop_csv is not None or predictions is not None):
+        given = "--bop-csv" if bop_csv is not None else "--predictions"
+        raise PosenetError(f"--by-factor writes a per-group table (--json), not {given}: run eval without "
+                           f"--by-factor for the estimates")  # fmt: skip
+    if by_factor is None and len(ckpt) != 1:
+        raise PosenetError("several --ckpt are only compared with --by-factor")
+    for c in ckpt:  # every checkpoint, of the right kind, before any work
+        load_checkpoint(c, kind="pose")
+    for path in (json_path, predictions, bop_csv):
+        if path is not None:
+            check_output(path, folder=False, overwrite=overwrite)
+    if by_factor is None and predictions is None:  # the default: replaced when there, as the user named none
+        predictions = json_path.with_suffix(".predictions.jsonl") if json_path else ckpt[0].with_name(
+            f"predictions_{split}.jsonl")  # fmt: skip
+        check_output(predictions, folder=False, overwrite=True)
     if by_factor is not None:
-        if bop_csv is not None:
-            raise PosenetError("--bop-csv writes the estimates of one checkpoint, not a --by-factor table")
         res = run_by_factor(data, list(ckpt), by_factor, split, boxes, workers, batch_size, obj_id, methods)
         click.echo(f"boxes: {res['boxes']}")
         click.echo(by_factor_table(res))
         if json_path is not None:
-            atomic_write_text(json_path, json.dumps(res, indent=2) + "\n")
+            write_output(json_path, json.dumps(res, indent=2) + "\n")
         return
-    if len(ckpt) != 1:
-        raise PosenetError("several --ckpt are only compared with --by-factor")
     results = evaluate_pnp(
         data, ckpt[0], methods, split, boxes, workers=workers, batch_size=batch_size, obj_id=obj_id
     )
@@ -195,22 +209,14 @@ def eval_cmd(
     columns = ["value"] if methods == ("patch",) else [PNP_LABELS[m] for m in methods]
     rows = summary_rows(summaries, keys=set().union(*summaries))
     click.echo(format_table([f"{variant} on {split}", *columns], rows))
-    if predictions is None:
-        predictions = (
-            json_path.with_suffix(".predictions.jsonl")
-            if json_path
-            else ckpt[0].with_name(f"predictions_{split}.jsonl")
-        )
     records = [{**json_record(r), "pnp": m} for m, res in results.items() for r in res.records]
-    atomic_write_text(predictions, "".join(json.dumps(r) + "\n" for r in records))
+    write_output(predictions, "".join(json.dumps(r) + "\n" for r in records))
     if json_path is not None:
         body = summaries[0] if len(methods) == 1 else {m: r.summary for m, r in results.items()}
-        atomic_write_text(
-            json_path, json.dumps({"variant": variant, "split": split, **body}, indent=2) + "\n"
-        )
+        write_output(json_path, json.dumps({"variant": variant, "split": split, **body}, indent=2) + "\n")
     click.echo(f"predictions: {predictions}")
     if bop_csv is not None:
-        atomic_write_text(bop_csv, bop_results_csv(results[methods[0]].records))
+        write_output(bop_csv, bop_results_csv(results[methods[0]].records))
         click.echo(f"BOP results: {bop_csv}")
 
 
@@ -233,7 +239,13 @@ def train_detector_cmd(
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "cpu"
     cfg = load_detector_config(config, obj_id)
-    click.echo(f"checkpoint: {train_detector(data, out, cfg, resume=resume, max_steps=max_steps)}")
+    last = train_detector(data, out, cfg, resume=resume, max_steps=max_steps)
+    best = last.with_name(BEST)
+    click.echo(f"checkpoint: {last}")
+    if best.is_file():
+        click.echo(f"best on val: {best} (the one for posenet boxes / predict --detector)")
+    else:
+        click.echo(f"no {BEST}: the dataset has no val images to select on; give {last.name} to --detector")
 
 
 @main.command()
@@ -245,22 +257,33 @@ def train_detector_cmd(
               help="Relative std of centre shift and log size change (0: exact GT boxes).")  # fmt: skip
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--obj-id", type=click.IntRange(min=1), default=1, show_default=True, help="Object to box.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing --out.")
 @one_line_errors(PosenetError, ScgenError)
 def boxes(
-    data: Path, out: Path, split: str, detector: Path | None, noise: float, seed: int, obj_id: int
+    data: Path,
+    out: Path,
+    split: str,
+    detector: Path | None,
+    noise: float,
+    seed: int,
+    obj_id: int,
+    overwrite: bool,
 ) -> None:
     """Write one box per image of a split: the detector's (misses recorded), else the GT full-object boxes,
     optionally perturbed."""
+    check_output(out, folder=False, overwrite=overwrite)
+    if detector is not None and noise > 0:
+        raise PosenetError("--noise perturbs the ground-truth boxes: it takes no --detector")
     if detector is None:
         insts = [i for i in scan_split(data, split, obj_id) if i.px_count_visib > 0]
         entries = boxes_from_gt(insts, noise, seed)
-        label = "ground-truth"
+        label = f"perturbed ground-truth (--noise {noise:g}, seed {seed})" if noise > 0 else "ground-truth"
     else:
         device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
         _, dets, _ = detect_split(detector, data, split, obj_id, device)
         entries = detection_entries(dets, obj_id, f"detector:{detector}")
         label = f"detector ({sum(d.box is None for d in dets)} misses)"
-    atomic_write_text(out, json.dumps(entries) + "\n")
+    write_output(out, json.dumps(entries) + "\n")
     click.echo(f"{len(entries)} {label} boxes -> {out}")
 
 
@@ -282,6 +305,7 @@ def boxes(
 @click.option(
     "--onnx", is_flag=True, help="Also export each variant to ONNX and time it in onnxruntime (CPU)."
 )
+@click.option("--overwrite", is_flag=True, help="Replace an existing --json.")
 @one_line_errors(PosenetError, ScgenError)
 def bench(
     variants: tuple[str, ...],
@@ -293,9 +317,12 @@ def bench(
     backbone: str | None,
     json_path: Path | None,
     onnx: bool,
+    overwrite: bool,
 ) -> None:
     """Params, MACs and batch-1 latency / FPS of the pose-network variants (architecture only, random
     init: no weights needed); with --onnx, onnxruntime's latency beside torch's."""
+    if json_path:
+        check_output(json_path, folder=False, overwrite=overwrite)
     if threads:
         torch.set_num_threads(threads)
     dev = resolve_device(device)
@@ -304,18 +331,20 @@ def bench(
     click.echo(format_report(rows, label, paper={} if smoke else PAPER))
     if json_path:
         payload = {"device": label, "variants": [asdict(r) for r in rows]}
-        json_path.write_text(json.dumps(payload, indent=2) + "\n")
+        write_output(json_path, json.dumps(payload, indent=2) + "\n")
 
 
 @main.command("export")
 @click.option("--ckpt", type=PATH, required=True, help="Pose checkpoint (last.pt).")
 @click.option("--onnx", "onnx_path", type=PATH, required=True, help="ONNX file to write.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing --onnx file.")
 @one_line_errors(PosenetError, ScgenError)
-def export_cmd(ckpt: Path, onnx_path: Path) -> None:
+def export_cmd(ckpt: Path, onnx_path: Path, overwrite: bool) -> None:
     """Export a pose network to ONNX (opset 18, dynamic batch): inputs roi_img, roi_coord2d; outputs mask,
     xyz, region, rot6d, site. Checks onnxruntime's outputs against torch's on a random batch of 2."""
     from posenet.onnx_export import OPSET, export_onnx, max_difference, onnx_session  # ~0.6 s: only here
 
+    check_output(onnx_path, folder=False, overwrite=overwrite)
     model, _ = load_model(ckpt, torch.device("cpu"))
     export_onnx(model, onnx_path)
     diff = max_difference(model, onnx_session(onnx_path))
@@ -332,21 +361,33 @@ def export_cmd(ckpt: Path, onnx_path: Path) -> None:
     required=True,
     help="Checkpoint; repeat to compare models side by side.",
 )
-@click.option("--samples", required=True, help="Comma-separated sample ids (im_id), e.g. 3,17,42.")
+@click.option(
+    "--samples", default=None, help="Comma-separated sample ids (im_id), e.g. 3,17,42 (without: lists them)."
+)
 @click.option("--split", default="test", show_default=True)
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for the PNGs.")
+@click.option("--overwrite", is_flag=True, help="Write into an existing, non-empty --out.")
 @one_line_errors(PosenetError, ScgenError)
-def viz(data: Path, ckpts: tuple[Path, ...], samples: str, split: str, out: Path) -> None:
+def viz(
+    data: Path, ckpts: tuple[Path, ...], samples: str | None, split: str, out: Path, overwrite: bool
+) -> None:
     """Pose overlays (predicted green vs GT white contour) and feature-response heat maps, as PNGs."""
+    check_output(out, folder=True, overwrite=overwrite)
+    states = [load_checkpoint(c, kind="pose") for c in ckpts]
+    if samples is None:
+        obj_id = config_from_dict(states[0]["config"]).data.obj_id
+        held = sorted({i.im_id for i in scan_split(data, split, obj_id)})
+        shown = ",".join(map(str, held[:20])) + (f",... ({len(held)} in all)" if len(held) > 20 else "")
+        raise PosenetError(f"give --samples: split '{split}' of {data} holds sample ids {shown or 'none'}")
     try:
         ids = [int(s) for s in samples.split(",") if s.strip()]
     except ValueError as exc:
         raise PosenetError(f"--samples must be comma-separated integers, got '{samples}'") from exc
-    out.mkdir(parents=True, exist_ok=True)
-    for name, panel in (("poses.png", overlay_panel(data, split, list(ckpts), ids)),
-                        ("features.png", heatmap_panel(data, split, list(ckpts), ids))):  # fmt: skip
-        cv2.imwrite(str(out / name), panel)
-        click.echo(f"wrote {out / name}")
+    panels = {"poses.png": overlay_panel(data, split, list(ckpts), ids),
+              "features.png": heatmap_panel(data, split, list(ckpts), ids)}  # fmt: skip
+    for name, panel in panels.items():
+        ok, png = cv2.imencode(".png", panel)
+        click.echo(f"wrote {write_output(out / name, png.tobytes())}")
 
 
 @main.command()

@@ -37,7 +37,7 @@ from posenet.errors import PosenetError
 from posenet.losses import LOSS_TERMS, PmObject, pose_losses
 from posenet.models import PoseNet, create_model
 from posenet.predict.camera import training_camera
-from scgen.io import atomic_write_text
+from scgen.io import ScgenError, atomic_write_text, check_output, first_missing
 
 LOG_FILE = "train_log.jsonl"
 LAST = "last.pt"
@@ -237,7 +237,7 @@ def train(
         raise PosenetError("--minutes fits a new run's whole schedule: it takes no --resume or --max-steps")
     budget = TimeBudget(60 * minutes, cfg.optim.anneal_point) if minutes is not None else None
     rank, world, device = _init_distributed()
-    created = not out.exists()
+    made = first_missing(out)  # removed if the run fails before its first checkpoint
     try:
         run = _set_up(data, out, cfg, resume, max_steps, rank, world, device, budget)
         # a time budget's length is known once fitted
@@ -248,10 +248,10 @@ def train(
             if log is not None:
                 log.close()
         return out / LAST
-    except PosenetError:
+    except (PosenetError, ScgenError):
         # a sample that cannot be read: a run folder this call made holds nothing to resume, so it goes
-        if rank == 0 and created and not (out / LAST).exists():
-            shutil.rmtree(out, ignore_errors=True)
+        if rank == 0 and made is not None and not (out / LAST).exists():
+            shutil.rmtree(made, ignore_errors=True)
         raise
     finally:
         if world > 1:
@@ -297,7 +297,7 @@ def _set_up(
     o = cfg.optim
     _refuse(out, o.batch_size, resume, world)
     dataset = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
-    state = load_checkpoint(out / LAST) if resume else None
+    state = load_checkpoint(out / LAST, kind="pose") if resume else None
     # a resumed run keeps the schedule it started with (a time budget's fitted one included)
     total = (state or {}).get("schedule_steps") or o.epochs * steps_per_epoch(len(dataset), o, world)
     sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
@@ -331,11 +331,22 @@ def _set_up(
 
 
 def _refuse(out: Path, batch_size: int, resume: bool, world: int) -> None:
-    """A global batch that does not split over the processes, or a new run over an existing one."""
+    """A global batch that does not split over the processes, or a run folder that cannot be used."""
     if batch_size % world:
         raise PosenetError(f"batch size {batch_size} does not split over {world} processes")
-    if not resume and (out / LAST).exists():
+    check_run_folder(out, resume)
+
+
+def check_run_folder(out: Path, resume: bool) -> None:
+    """The output rule for a run folder (pose or detector): one that can be made (scgen.io.check_output);
+    an existing run is only resumed, and a new run starts in an empty or absent folder."""
+    check_output(out, folder=True, overwrite=True, what="--out")
+    if resume or not out.is_dir():
+        return
+    if (out / LAST).exists():
         raise PosenetError(f"{out} already holds a run ({LAST}); pass --resume or choose another --out")
+    if any(out.iterdir()):
+        raise PosenetError(f"--out {out} is not empty and holds no run ({LAST}): choose another --out")
 
 
 def _loader(dataset: PoseDataset, sampler: EpochSampler, workers: int, device: torch.device) -> DataLoader:

@@ -179,6 +179,12 @@ def render(
 
     res = parse_resolution(resolution)
     overrides = {"background": {"user_dir": str(backgrounds_dir)}} if backgrounds_dir else {}
+    if backgrounds_dir and backgrounds_dir.is_dir():  # each image decoded before any sample is rendered
+        from scgen.io.image_file import check_images
+        from scgen.scenes.config import USER_IMAGE_SUFFIXES
+
+        images = sorted(p for p in backgrounds_dir.iterdir() if p.suffix.lower() in USER_IMAGE_SUFFIXES)
+        check_images(images, "background image")
     job = RenderJob(
         out=out, n=n, seed=seed, backend=backend, quality=quality, device=device, model_path=model_path,
         keep_scale=keep_scale, config_path=config_path, camera=camera, resolution=res,
@@ -207,8 +213,10 @@ def render(
 def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: bool, xyz_dtype: str,
              quiet: bool) -> None:  # fmt: skip
     """Label any BOP dataset: xyz maps of every scene_gt instance, masks and scene_gt_info where missing."""
+    from scgen.io.output_path import check_output
     from scgen.run.annotate_job import AnnotateJob, AnnotateOptions, disagreement_line, run_annotate
 
+    check_output(bop_dir, folder=True, overwrite=True, what="dataset")  # labelled in place, resumed
     job = AnnotateJob(bop_dir, split, workers or os.cpu_count() or 1, AnnotateOptions(xyz_dtype, overwrite))
     s = run_annotate(job, progress=not quiet)
     rate = s["instances"] / s["total_s"] if s["total_s"] > 0 else 0.0
@@ -274,33 +282,38 @@ def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
     "--groups-out",
     type=click.Path(path_type=Path),
     default=None,
-    help="Where --sample-groups writes (default DATASET/groups_SPLIT_nN_sS.json).",
+    help="Where --sample-groups writes (default DATASET/groups_SPLIT_nN_sS.json, replaced when there).",
 )
+@click.option("--overwrite", is_flag=True, help="Replace an existing --json, --csv, --plots or --groups-out.")
 @one_line_errors(ScgenError)
-def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_groups, seed, groups_out) -> None:
+def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_groups, seed, groups_out,
+          overwrite) -> None:  # fmt: skip
     """Group counts of the robustness factors (the help lists scgen.scenes.factors.FACTOR_GROUPS)."""
     import json
 
     from scgen.dataset.stats import compute_stats, format_table, to_csv, write_plots
     from scgen.dataset.stats import sample_groups as draw_groups
-    from scgen.io.atomic import atomic_write_text
+    from scgen.io.output_path import check_output, write_output
 
+    if sample_groups is not None and sample_groups <= 0:
+        raise ScgenError(f"--sample-groups must be positive, got {sample_groups}")
+    which = split or "test"
+    default_groups = Path(dataset) / f"groups_{which}_n{sample_groups}_s{seed}.json"
+    for path, folder in ((json_path, False), (csv_path, False), (plots_dir, True), (groups_out, False)):
+        if path:
+            check_output(path, folder, overwrite)
     result = compute_stats(dataset, split, min_group)
     click.echo(format_table(result))
     if json_path:
-        atomic_write_text(json_path, json.dumps(result, indent=1) + "\n")
+        write_output(json_path, json.dumps(result, indent=1) + "\n")
     if csv_path:
-        atomic_write_text(csv_path, to_csv(result))
+        write_output(csv_path, to_csv(result))
     if plots_dir:
         for p in write_plots(dataset, split, plots_dir):
             click.echo(f"wrote {p}")
     if sample_groups is not None:
-        if sample_groups <= 0:
-            raise ScgenError(f"--sample-groups must be positive, got {sample_groups}")
-        which = split or "test"
         groups = draw_groups(dataset, which, sample_groups, seed)
-        path = groups_out or Path(dataset) / f"groups_{which}_n{sample_groups}_s{seed}.json"
-        atomic_write_text(path, json.dumps(groups, indent=1) + "\n")
+        path = write_output(groups_out or default_groups, json.dumps(groups, indent=1) + "\n")
         click.echo(f"wrote {path}")
 
 
@@ -310,8 +323,14 @@ def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_grou
 @one_line_errors(ScgenError)
 def merge(out: Path, shards: tuple[Path, ...]) -> None:
     """Join shard outputs (same seed, config and model) into OUT, as if rendered in one run."""
+    from scgen.dataset.layout import MANIFEST
     from scgen.dataset.merge import merge_shards
+    from scgen.io.output_path import check_output
 
+    # OUT resumes when it holds a dataset (merge_shards refuses one of other settings), else is new or empty
+    check_output(out, folder=True, overwrite=True, what="OUT")
+    if out.is_dir() and not (out / MANIFEST).is_file() and any(out.iterdir()):
+        raise ScgenError(f"OUT {out} is not empty and holds no dataset: merge into a new folder or a shard")
     n, total = merge_shards(out, list(shards))
     click.echo(f"{out}: {n}/{total} samples after merging {len(shards)} shard folder(s)")
 
@@ -360,14 +379,19 @@ def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | No
 @scene_options
 @click.option("--resolution", default="320x240", show_default=True, help="Image size WxH.")
 @click.option("--quality", default="draft", show_default=True, help="draft | default | high.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing OUT/preview.png.")
 @one_line_errors(ScgenError)
-def preview(out, n, backend, seed, model_path, keep_scale, config_path, camera, resolution, quality) -> None:
+def preview(out, n, backend, seed, model_path, keep_scale, config_path, camera, resolution, quality,
+            overwrite) -> None:  # fmt: skip
     """Render n samples in memory, as render would, and write OUT/preview.png: RGB, masks, xyz, factors."""
     from scgen.generator import Generator
+    from scgen.io.output_path import check_output
     from scgen.preview import build_preview, save_png
 
     if n <= 0:
         raise ScgenError(f"--n must be a positive number of samples, got {n}")
+    check_output(Path(out), folder=True, overwrite=True)  # OUT may hold other files; preview.png is checked
+    check_output(Path(out) / "preview.png", folder=False, overwrite=overwrite)
     generator = Generator.load(
         model_path,
         config_path,

@@ -163,7 +163,7 @@ def test_bad_input_is_one_line_and_writes_nothing(small_dataset: Path, tmp_path:
     cases = [
         ([str(not_dataset), "--format", "coco", "--out", str(out)], str(not_dataset)),
         ([str(small_dataset), "--format", "yolo", "--out", str(out)], "'yolo'"),
-        ([str(small_dataset), "--format", "coco", "--out", str(full)], f"{full} exists and is not empty"),
+        ([str(small_dataset), "--format", "coco", "--out", str(full)], f"{full} exists (give --overwrite"),
         ([str(small_dataset), "--format", "coco", "--out", str(small_dataset / "coco")], "overlaps"),
         ([str(small_dataset), "--format", "coco", "--out", str(out), "--images", "copy"], "speedplus only"),
         ([str(small_dataset), "--format", "speedplus", "--out", str(out), "--images", "move"], "'move'"),

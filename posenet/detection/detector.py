@@ -27,6 +27,7 @@ from torchvision.ops import FeaturePyramidNetwork
 
 from posenet.config import OptimConfig, override_fields, plain, read_config_file
 from posenet.data.augment import brightness_contrast
+from posenet.data.io import read_bgr, read_mask
 from posenet.data.layout import Instance, scan_split
 from posenet.errors import PosenetError
 from posenet.models.backbone import IMAGENET, PACKAGE, initial_weights, input_mean_std, timm_features
@@ -221,7 +222,7 @@ def random_zoom(
 
 def _read_rgb(path: Path) -> np.ndarray:
     """An image as float32 RGB in [0, 1]."""
-    return cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB).astype(np.float32) / 255
+    return cv2.cvtColor(read_bgr(path), cv2.COLOR_BGR2RGB).astype(np.float32) / 255
 
 
 def paste_target(
@@ -239,7 +240,7 @@ def paste_target(
     if not shown:
         return img, boxes
     x0, y0, x1, y1 = (int(v) for v in visible_boxes(shown[:1])[0])
-    mask = cv2.imread(str(shown[0].mask_visib), cv2.IMREAD_GRAYSCALE)[y0:y1, x0:x1] > 0
+    mask = read_mask(shown[0].mask_visib)[y0:y1, x0:x1] > 0
     patch, s = _read_rgb(shown[0].rgb)[y0:y1, x0:x1], rng.uniform(*scale)
     h, w = img.shape[:2]
     size = (max(1, round(patch.shape[1] * s)), max(1, round(patch.shape[0] * s)))

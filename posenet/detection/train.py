@@ -8,6 +8,7 @@ last.pt is written. Without a val split (or no image in it), best.pt is not writ
 from __future__ import annotations
 
 import math
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -32,13 +33,14 @@ from posenet.train import (
     LAST,
     RunLog,
     before_loader_fork,
+    check_run_folder,
     make_optimizer,
     memory_format,
     pin_cpu_threads,
     stop_step,
     worker_init,
 )
-from scgen.io import atomic_write_text
+from scgen.io import ScgenError, atomic_write_text, first_missing
 
 BEST = "best.pt"
 
@@ -46,11 +48,21 @@ BEST = "best.pt"
 def train_detector(
     data: Path, out: Path, cfg: DetectorConfig, resume: bool = False, max_steps: int | None = None
 ) -> Path:
-    """Train on `data`'s train split into `out` on the current device; returns the path of last.pt."""
+    """Train on `data`'s train split into `out` on the current device; returns the path of last.pt. A run
+    that fails before its first checkpoint (an image that cannot be read) leaves no folder behind."""
+    check_run_folder(out, resume)
+    made = first_missing(out)
+    try:
+        return _train(data, out, cfg, resume, max_steps)
+    except (PosenetError, ScgenError):
+        if made is not None and not (out / LAST).exists():
+            shutil.rmtree(made, ignore_errors=True)
+        raise
+
+
+def _train(data: Path, out: Path, cfg: DetectorConfig, resume: bool, max_steps: int | None) -> Path:
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     o = cfg.optim
-    if not resume and (out / LAST).exists():
-        raise PosenetError(f"{out} already holds a run ({LAST}); pass --resume or choose another --out")
     train_set = DetectionDataset(image_groups(data, "train", cfg.obj_id), cfg, train=True, seed=o.seed)
     per_epoch = len(train_set) // o.batch_size
     if per_epoch == 0:
@@ -66,7 +78,7 @@ def train_detector(
     optimizer, scheduler = make_optimizer(model, o, total)
     step, best = 0, -math.inf
     if resume:
-        state = load_checkpoint(out / LAST)
+        state = load_checkpoint(out / LAST, kind="detector")
         if state["model_config"] != cfg.model_dict():
             raise PosenetError(f"{out / LAST} is from another detector configuration")
         model.load_state_dict(state["model"])

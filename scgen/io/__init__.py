@@ -14,7 +14,13 @@ from scgen.io.atomic import atomic_write_bytes, atomic_write_text
 from scgen.io.bop import NOT_A_FOLDER, not_a_dataset
 from scgen.io.exr import read_xyz_exr
 from scgen.io.image_file import read_image, why_unreadable
-from scgen.io.output_path import check_output, existing_parent, make_output_folder
+from scgen.io.output_path import (
+    check_output,
+    existing_parent,
+    first_missing,
+    make_output_folder,
+    write_output,
+)
 from scgen.io.yaml_file import NUMBER_FORM, load_yaml
 
 __all__ = [
@@ -26,10 +32,12 @@ __all__ = [
     "bop",
     "check_output",
     "existing_parent",
+    "first_missing",
     "load_yaml",
     "make_output_folder",
     "not_a_dataset",
     "read_image",
     "read_xyz_exr",
     "why_unreadable",
+    "write_output",
 ]

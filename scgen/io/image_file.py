@@ -10,11 +10,13 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import cv2
 import numpy as np
+
+from scgen.errors import ScgenError
 
 
 def read_image(path: Path, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray | None:
@@ -50,3 +52,11 @@ def _quiet_stderr() -> Iterator[None]:
     finally:
         os.dup2(saved, 2)
         os.close(saved)
+
+
+def check_images(paths: Iterable[Path], what: str = "image") -> None:
+    """Decode every file before any work starts (a user's backgrounds): the first that cannot be read is
+    one ScgenError line naming it and why."""
+    for path in paths:
+        if read_image(Path(path), cv2.IMREAD_COLOR) is None:
+            raise ScgenError(f"cannot read {what} {path}: {why_unreadable(Path(path))}")

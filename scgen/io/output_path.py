@@ -9,12 +9,24 @@ import os
 from pathlib import Path
 
 from scgen.errors import ScgenError
+from scgen.io.atomic import atomic_write_bytes
 
 
 def existing_parent(path: Path) -> Path:
     """`path`, or its nearest ancestor that exists (absolute)."""
     p = Path(path).absolute()
     while not p.exists():
+        p = p.parent
+    return p
+
+
+def first_missing(path: Path) -> Path | None:
+    """The outermost folder that making `path` would create (`path` itself, or its first missing ancestor),
+    or None when `path` exists: what a command that fails part-way removes so as to leave nothing behind."""
+    p = Path(path).absolute()
+    if p.exists():
+        return None
+    while not p.parent.exists():
         p = p.parent
     return p
 
@@ -44,3 +56,15 @@ def make_output_folder(path: Path) -> Path:
     except OSError as exc:
         raise ScgenError(f"cannot make output folder {path}: {exc.strerror or exc}") from exc
     return Path(path)
+
+
+def write_output(path: Path, data: str | bytes) -> Path:
+    """Write an output file checked by check_output: its missing parents made, the file atomically (a reader
+    never sees half of it); a failure is one ScgenError line."""
+    path = Path(path)
+    make_output_folder(path.parent)
+    try:
+        atomic_write_bytes(path, data.encode() if isinstance(data, str) else data)
+    except OSError as exc:
+        raise ScgenError(f"cannot write {path}: {exc.strerror or exc}") from exc
+    return path

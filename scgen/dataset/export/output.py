@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from scgen.errors import ScgenError
 from scgen.io.atomic import TMP_MARK
+from scgen.io.output_path import check_output
 
 if TYPE_CHECKING:
     from scgen.dataset.export.source import Source
@@ -41,14 +42,11 @@ class ExportFormat:
 
 
 def check_out(root: Path, out: Path, overwrite: bool) -> None:
-    """OUT must lie apart from the dataset folder, and be absent or empty unless `overwrite`."""
+    """OUT must lie apart from the dataset folder, then pass the one output rule (scgen.io.output_path)."""
     out_r, root_r = out.resolve(), root.resolve()
     if out_r == root_r or root_r in out_r.parents or out_r in root_r.parents:
         raise ScgenError(f"--out {out} overlaps the dataset folder {root}: choose a folder outside it")
-    if out.exists() and not out.is_dir():
-        raise ScgenError(f"--out {out} exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise ScgenError(f"--out {out} exists and is not empty (add --overwrite to replace it)")
+    check_output(out, folder=True, overwrite=overwrite, what="--out")
 
 
 @contextmanager
