@@ -77,6 +77,49 @@ def scene_options(command: Callable[..., Any]) -> Callable[..., Any]:
     return command
 
 
+def sequence_preview(command: Callable[..., Any]) -> Callable[..., Any]:
+    """preview's --sequence K: an animated GIF of sequence K of a [sequence] config instead of the sheet.
+    A wrapper around the command, so that preview's own parameters stay as they are."""
+
+    @functools.wraps(command)
+    def wrapper(*args: Any, sequence: int | None = None, **kwargs: Any) -> Any:
+        if sequence is None:
+            return command(*args, **kwargs)
+        return _preview_sequence(sequence, **kwargs)
+
+    option = click.option(
+        "--sequence", type=int, default=None,
+        help="Write OUT/sequence_K.gif (its frames also as OUT/sequence_K.png) instead: every frame of "
+        "sequence K of a [sequence] config, the target's outline and axes drawn.",
+    )  # fmt: skip
+    return option(wrapper)
+
+
+@one_line_errors(ScgenError)
+def _preview_sequence(sequence: int, out: Path, backend: str, seed: int, model_path: Path | None,
+                      keep_scale: bool, config_path: Path | None, camera: str | None, resolution: str,
+                      quality: str, overwrite: bool = False, **_: Any) -> None:  # fmt: skip
+    from scgen.generator import Generator
+    from scgen.io.output_path import check_output
+    from scgen.preview import build_sequence_preview, contact_sheet, save_gif, save_png
+    from scgen.scenes.sequence import is_sequence
+
+    if sequence < 0:
+        raise ScgenError(f"--sequence must be a sequence id >= 0, got {sequence}")
+    path, sheet = Path(out) / f"sequence_{sequence}.gif", Path(out) / f"sequence_{sequence}.png"
+    check_output(Path(out), folder=True, overwrite=True)
+    for p in (path, sheet):
+        check_output(p, folder=False, overwrite=overwrite)
+    generator = Generator.load(model_path, config_path, seed, parse_resolution(resolution), keep_scale,
+                               camera=camera, backend=backend, quality=quality)  # fmt: skip
+    if not is_sequence(generator.cfg):
+        raise ScgenError("--sequence needs a --config with a [sequence] table (docs/config.md#sequence)")
+    frames = build_sequence_preview(generator, sequence)
+    save_gif(frames, path)
+    save_png(contact_sheet(frames), sheet)
+    click.echo(f"wrote {path} and {sheet.name} ({len(frames)} frames of sequence {sequence}, {backend})")
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="scgen", prog_name="scgen")
 def main() -> None:
@@ -374,6 +417,7 @@ def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | No
 
 
 @main.command()
+@sequence_preview
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for preview.png.")
 @click.option("--n", "n", type=int, default=16, show_default=True, help="Number of samples (ids 0..n-1).")
 @scene_options

@@ -127,3 +127,55 @@ def build_preview(generator: Generator, n: int) -> np.ndarray:
             xyz_rgb = xyz_colours(ann.xyz, ann.mask_visib, lo, hi)
             tiles.append(sample_tile(display_rgb(sample.buffers.rgb), ann, xyz_rgb, caption))
     return contact_sheet(tiles)
+
+
+AXIS_COLOURS = ((255, 70, 70), (70, 230, 70), (90, 150, 255))  # the model's x, y, z axes: red, green, blue
+
+
+def draw_axes(rgb: np.ndarray, spec: SceneSpec, length: float) -> np.ndarray:
+    """The image with the model frame's axes (from its origin, `length` metres long) as the pose puts them,
+    projected through the camera; an axis reaching behind the camera is left out."""
+    out = rgb.copy()
+    R, t = spec.target.R_mat, spec.target.t_vec
+    points = np.vstack([t, length * R.T + t])  # rows: the origin, then the x, y, z axes' ends
+    if np.any(points[:, 2] <= 1e-6):
+        return out
+    uv = spec.camera.project(points)
+    origin = tuple(int(round(c)) for c in uv[0])
+    for end, colour in zip(uv[1:], AXIS_COLOURS, strict=True):
+        cv2.line(out, origin, tuple(int(round(c)) for c in end), colour, 1, cv2.LINE_AA)
+    return out
+
+
+def sequence_frame(rgb: np.ndarray, spec: SceneSpec, ann: Annotation, diameter: float) -> np.ndarray:
+    """One frame of a sequence preview: the image with the mask outlines and the model's axes, a caption."""
+    image = draw_axes(outlines(rgb, ann), spec, 0.5 * diameter)
+    f = spec.sequence
+    assert f is not None
+    eclipse = ", ECLIPSE" if f.eclipse else ""
+    lines = [f"seq {f.sequence} frame {f.frame}  t {f.time_s:.1f} s  range {f.range_m:.1f} m",
+             f"{f.profile}, {f.attitude}, {spec.background.kind}{eclipse}"]  # fmt: skip
+    text = np.zeros((CAPTION_H - 14, image.shape[1], 3), np.uint8)
+    for k, line in enumerate(lines):
+        cv2.putText(text, line, (3, 12 + 14 * k), cv2.FONT_HERSHEY_PLAIN, 0.75, (235, 235, 235), 1,
+                    cv2.LINE_AA)  # fmt: skip
+    return np.vstack([image, text])
+
+
+def build_sequence_preview(generator: Generator, sequence: int) -> list[np.ndarray]:
+    """Render and annotate every frame of sequence `sequence` exactly as `scgen render` does; return the
+    frames with the target's outline (full: cyan, visible: yellow) and axes (x red, y green, z blue)."""
+    frames = []
+    with generator:
+        for spec in generator.sequence(sequence):
+            sample = generator.render(spec)
+            frames.append(sequence_frame(display_rgb(sample.buffers.rgb), spec, sample.annotation,
+                                         generator.model.diameter))  # fmt: skip
+    return frames
+
+
+def save_gif(frames: list[np.ndarray], path: Path, frame_ms: int = 200) -> None:
+    """An animated GIF, looping, each frame shown `frame_ms` (one adaptive 256-colour palette per frame)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    images = [Image.fromarray(f).quantize(256, method=Image.Quantize.MEDIANCUT) for f in frames]
+    images[0].save(path, save_all=True, append_images=images[1:], duration=frame_ms, loop=0, optimize=True)

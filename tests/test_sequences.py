@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from scgen import Generator
@@ -206,3 +207,18 @@ def test_the_example_config_gives_the_sequences_its_docs_say():
     assert approaches  # 40 % of the sequences: seed 0 draws 4 of 6
     for frames in approaches:
         assert frames[-1].sequence.range_m < frames[0].sequence.range_m
+
+
+def test_preview_of_a_sequence_writes_its_frames_as_a_gif(tmp_path: Path):
+    """`scgen preview --sequence K` animates every frame of sequence K; without a [sequence] table it is
+    one line naming what is missing."""
+    config = tmp_path / "s.toml"
+    config.write_text("[sequence]\nframes = 3\ndt_s = 10.0\n")
+    args = ["preview", "--out", str(tmp_path / "pv"), "--backend", "mitsuba", "--resolution", "64x48"]
+    result = CliRunner().invoke(main, [*args, "--config", str(config), "--sequence", "1"])
+    assert result.exit_code == 0, result.output
+    with Image.open(tmp_path / "pv" / "sequence_1.gif") as gif:
+        assert gif.n_frames == 3
+    assert (tmp_path / "pv" / "sequence_1.png").is_file()
+    result = CliRunner().invoke(main, [*args, "--sequence", "0"])
+    assert result.exit_code == 1 and "[sequence] table" in result.output
