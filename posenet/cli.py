@@ -337,18 +337,45 @@ def bench(
 @main.command("export")
 @click.option("--ckpt", type=PATH, required=True, help="Pose checkpoint (last.pt).")
 @click.option("--onnx", "onnx_path", type=PATH, required=True, help="ONNX file to write.")
+@click.option("--detector", type=PATH, default=None, help="Also a detector checkpoint, for posenet predict.")
+@click.option("--detector-onnx", type=PATH, default=None, help="Where --detector's graph goes.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --onnx file.")
 @one_line_errors(PosenetError, ScgenError)
-def export_cmd(ckpt: Path, onnx_path: Path, overwrite: bool) -> None:
+def export_cmd(
+    ckpt: Path, onnx_path: Path, detector: Path | None, detector_onnx: Path | None, overwrite: bool
+) -> None:
     """Export a pose network to ONNX (opset 18, dynamic batch): inputs roi_img, roi_coord2d; outputs mask,
-    xyz, region, rot6d, site. Checks onnxruntime's outputs against torch's on a random batch of 2."""
+    xyz, region, rot6d, site. Checks onnxruntime's outputs against torch's on a random batch of 2. With
+    --detector, also the detector's best box and score for one image of the pose network's training camera
+    (what `posenet predict --onnx POSE.onnx --detector DET.onnx` runs)."""
     from posenet.onnx_export import OPSET, export_onnx, max_difference, onnx_session  # ~0.6 s: only here
 
+    if (detector is None) != (detector_onnx is None):
+        raise PosenetError("--detector and --detector-onnx go together")
     check_output(onnx_path, folder=False, overwrite=overwrite)
-    model, _ = load_model(ckpt, torch.device("cpu"))
+    if detector_onnx is not None:
+        check_output(detector_onnx, folder=False, overwrite=overwrite)
+    model, state = load_model(ckpt, torch.device("cpu"))
+    if detector is not None:
+        export_detector_graph(detector, detector_onnx, state, ckpt)  # type: ignore[arg-type]
+        click.echo(f"onnx: {detector_onnx} (the detector's best box, opset {OPSET})")
     export_onnx(model, onnx_path)
     diff = max_difference(model, onnx_session(onnx_path))
     click.echo(f"onnx: {onnx_path} (opset {OPSET}, dynamic batch); max |onnxruntime - torch| = {diff:.2e}")
+
+
+def export_detector_graph(detector: Path, path: Path, pose_state: dict, ckpt: Path) -> None:
+    """The detector's DetectorBestBox graph at the size of the pose checkpoint's training camera."""
+    from posenet.detection.detect import load_detector
+    from posenet.onnx_export import export_detector_onnx
+
+    if "camera" not in pose_state:
+        raise PosenetError(
+            f"{ckpt} predates posenet predict (no training camera): retrain it to export --detector"
+        )
+    model, state = load_detector(detector, torch.device("cpu"))
+    size = tuple(pose_state["camera"]["size"])
+    export_detector_onnx(model, path, size, state["model_config"]["score_thresh"])
 
 
 @main.command()
@@ -423,6 +450,14 @@ def viz(
 )
 @click.option("--no-vis", is_flag=True, help="No overlays (images, video, sheet.jpg).")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option(
+    "--onnx",
+    "onnx_path",
+    type=PATH,
+    default=None,
+    help="The pose network's ONNX graph (posenet export) run in onnxruntime instead of torch; a .onnx "
+    "--detector runs there too.",
+)
 @click.option("--overwrite", is_flag=True, help="Write into an existing, non-empty --out.")
 @one_line_errors(PosenetError, ScgenError)
 def predict(
@@ -438,15 +473,16 @@ def predict(
     formats: tuple[str, ...],
     no_vis: bool,
     device: str,
+    onnx_path: Path | None,
     overwrite: bool,
 ) -> None:
     """Poses from images a user brings: SOURCE is an image, a folder, a glob or a video (or --data DIR
     --split S). Each image is warped into the camera the network was trained with (lens, focal length and
     size: docs/posenet.md), boxed by --detector (or --box / --boxes; with --data and neither, the
     ground-truth boxes, as posenet eval), cropped, and its pose decoded in the user's camera."""
-    inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
-                            preset_intrinsics)  # fmt: skip
     check_output(out, folder=True, overwrite=overwrite)
+    inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
+                            preset_intrinsics, onnx_path)  # fmt: skip
     make_output_folder(out)
     with tqdm(total=inputs.total, desc="predict", unit="img", dynamic_ncols=True) as bar:
         run = run_predict(inputs.predictor, inputs.frames, inputs.total, out, inputs.camera, inputs.box_for,

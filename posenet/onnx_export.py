@@ -1,4 +1,4 @@
-"""ONNX export of a pose network (opset 18, dynamic batch) and its onnxruntime session.
+"""ONNX export of a pose network (opset 18, dynamic batch) and of a detector, and their onnxruntime sessions.
 
 The graph takes `roi_img` (B x 3 x R x R, RGB in [0, 1]) and `roi_coord2d` (B x 2 x r x r) and returns
 the head outputs pose decoding needs, in OUTPUTS order (mask and region logits, xyz, allocentric rot6d,
@@ -16,8 +16,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import onnx
 import onnxruntime as ort
 import torch
+import torchvision.ops.boxes as box_ops
 from onnxscript import opset18 as op
 from torch import Tensor, nn
 
@@ -27,6 +29,7 @@ OPSET = 18
 logging.getLogger("onnxscript").setLevel(logging.ERROR)  # its optimiser's notes on every export
 INPUTS = ("roi_img", "roi_coord2d")
 OUTPUTS = ("mask", "xyz", "region", "rot6d", "site")
+DETECTOR_SCORE_KEY = "posenet.score_thresh"  # a detector graph's metadata: boxes scoring below are misses
 
 
 class PoseOutputs(nn.Module):
@@ -105,3 +108,70 @@ def max_difference(model: PoseNet, session: ort.InferenceSession, batch: int = 2
     coord = torch.rand(batch, 2, c.output_res, c.output_res, generator=gen)
     ours, theirs = model.cpu().eval()(img, coord), run_onnx(session, img, coord)
     return max(float((ours[k] - theirs[k]).abs().max()) for k in OUTPUTS)
+
+
+class DetectorBestBox(nn.Module):
+    """A torchvision FCOS detector reduced to what predict reads of it: the best box ([x0, y0, x1, y1]
+    pixel edges) and its score, for one RGB image in [0, 1] (1 x 3 x H x W). Its own resize, normalisation
+    and box decoding are inside the graph; the best-scoring box is the one its NMS keeps first, so this
+    equals the full detector's first detection (tests/test_posenet_predict.py)."""
+
+    def __init__(self, fcos: nn.Module) -> None:
+        super().__init__()
+        self.fcos = fcos
+
+    def forward(self, image: Tensor) -> tuple[Tensor, Tensor]:
+        height, width = image.shape[-2:]
+        images, _ = self.fcos.transform([image[0]])
+        features = list(self.fcos.backbone(images.tensors).values())
+        head = self.fcos.head(features)
+        anchors = self.fcos.anchor_generator(images, features)[0]
+        scores = torch.sqrt(torch.sigmoid(head["cls_logits"][0]) * torch.sigmoid(head["bbox_ctrness"][0]))
+        best = torch.argmax(scores.flatten())
+        anchor = best // scores.shape[-1]
+        box = self.fcos.box_coder.decode(
+            head["bbox_regression"][0][anchor : anchor + 1], anchors[anchor : anchor + 1]
+        )
+        rh, rw = images.image_sizes[0]
+        box = box_ops.clip_boxes_to_image(box, (rh, rw))
+        scale = torch.tensor([width / rw, height / rh, width / rw, height / rh], dtype=box.dtype)
+        return box[0] * scale, scores.flatten()[best]
+
+
+def export_detector_onnx(model: nn.Module, path: Path, size: tuple[int, int], score_thresh: float) -> None:
+    """Write the detector's DetectorBestBox as an ONNX graph for images of `size` (width, height): the
+    pose network's training camera, which predict warps every image into. The score threshold travels in
+    the graph's metadata (DETECTOR_SCORE_KEY)."""
+    example = torch.rand(1, 3, size[1], size[0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        program = torch.onnx.export(
+            DetectorBestBox(model.cpu().eval()),
+            (example,),
+            dynamo=True,
+            opset_version=OPSET,
+            input_names=["image"],
+            output_names=["box", "score"],
+            verbose=False,
+        )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".partial")
+    program.save(str(tmp))
+    graph = onnx.load(str(tmp))
+    onnx.helper.set_model_props(graph, {DETECTOR_SCORE_KEY: repr(float(score_thresh))})
+    onnx.save(graph, str(tmp))
+    os.replace(tmp, path)
+
+
+def input_shape(session: ort.InferenceSession, name: str) -> list[Any]:
+    """The declared shape of a graph input (a dynamic axis is a string)."""
+    return next(i.shape for i in session.get_inputs() if i.name == name)
+
+
+def run_detector_onnx(session: ort.InferenceSession, image: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """The best box [x0, y0, x1, y1] and score of a DetectorBestBox graph for one RGB image (H x W x 3
+    float32 in [0, 1]), or None under the graph's score threshold."""
+    feed = np.ascontiguousarray(image.transpose(2, 0, 1))[None]
+    box, score = session.run(None, {"image": feed})
+    thresh = float(session.get_modelmeta().custom_metadata_map.get(DETECTOR_SCORE_KEY, "0"))
+    return (np.asarray(box, np.float64), float(score)) if float(score) > thresh else None

@@ -272,3 +272,21 @@ def test_the_readme_predict_example_runs_as_written(pose_ckpt: Path, user_folder
     assert out.returncode == 0, out.stderr
     quaternion = json.loads(out.stdout[: out.stdout.index("]") + 1])
     assert len(quaternion) == 4 and abs(np.linalg.norm(quaternion) - 1) < 1e-6
+
+
+def test_onnx_gives_torch_poses(user_folder: Path, pose_ckpt: Path, detector_ckpt: Path, tmp_path: Path):
+    """posenet export writes both graphs; predict through onnxruntime finds torch's boxes and poses."""
+    pose_onnx, det_onnx = tmp_path / "pose.onnx", tmp_path / "det.onnx"
+    _invoke("export", "--ckpt", pose_ckpt, "--onnx", pose_onnx, "--detector", detector_ckpt,
+            "--detector-onnx", det_onnx)  # fmt: skip
+    common = [user_folder, "--ckpt", pose_ckpt, "--camera", user_folder / "camera.json", "--no-vis"]
+    _invoke("predict", *common, "--detector", detector_ckpt, "--out", tmp_path / "torch")
+    _invoke("predict", *common, "--detector", det_onnx, "--onnx", pose_onnx, "--out", tmp_path / "onnx")
+    torch_lines, onnx_lines = (_lines(tmp_path / d / "predictions.jsonl") for d in ("torch", "onnx"))
+    assert len(torch_lines) == len(onnx_lines) > 0
+    for a, b in zip(torch_lines, onnx_lines, strict=True):
+        assert a["flags"] == b["flags"] and a["score"] == pytest.approx(b["score"], abs=1e-4)
+        if a["R"] is not None:
+            np.testing.assert_allclose(b["box"], a["box"], atol=0.02)
+            np.testing.assert_allclose(b["R"], a["R"], atol=1e-3)
+            np.testing.assert_allclose(b["t"], a["t"], atol=1e-3)

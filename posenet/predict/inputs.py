@@ -67,6 +67,7 @@ def predict_inputs(
     boxes: Path | None,
     device: torch.device,
     presets: PresetLookup,
+    onnx: Path | None = None,
 ) -> PredictInputs:
     """The checked inputs of one predict run (nothing is written here)."""
     if (source is None) == (data is None):
@@ -77,7 +78,7 @@ def predict_inputs(
         raise PosenetError("--camera is required with SOURCE: fx,fy,cx,cy[,dist], a camera.json, a scgen "
                            "preset name, or 'training' (the checkpoint's own camera)")  # fmt: skip
     fixed_box = parse_box(box) if box is not None else None
-    predictor = Predictor.load(ckpt, detector, device, data)
+    predictor = Predictor.load(ckpt, detector, device, data, onnx)
     obj_id = predictor.obj.obj_id
     if data is not None:
         if camera is not None:

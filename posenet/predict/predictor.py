@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -107,20 +108,25 @@ class _Clock:
         self.timings.add(self.stage, time.perf_counter() - self.tic)
 
 
+Network = Callable[[torch.Tensor, torch.Tensor], dict[str, torch.Tensor]]  # (roi_img, roi_coord2d) -> heads
+Detector = Callable[[np.ndarray], tuple[np.ndarray, float] | None]  # RGB [0, 1] -> best [x0, y0, x1, y1]
+
+
 class Predictor:
-    """A pose network (and optionally a detector) ready for images from any camera."""
+    """A pose network (and optionally a detector), in torch or onnxruntime, ready for images from any
+    camera."""
 
     def __init__(
         self,
-        model: torch.nn.Module,
+        network: Network,
         state: dict[str, Any],
         obj: ObjectModel,
         camera: Camera,
-        detector: torch.nn.Module | None = None,
+        detector: Detector | None = None,
         device: torch.device | None = None,
     ) -> None:
         cfg = config_from_dict(state["config"])
-        self.model, self.obj, self.camera, self.detector = model, obj, camera, detector
+        self.network, self.obj, self.camera, self.detector = network, obj, camera, detector
         self.device = device or torch.device("cpu")
         self.pad_scale, self.mask_type = cfg.data.pad_scale, cfg.loss.mask_type
         model_cfg = state["model_config"]
@@ -135,34 +141,33 @@ class Predictor:
         detector: Path | None = None,
         device: str | torch.device = "cpu",
         data: Path | None = None,
+        onnx: Path | None = None,
     ) -> Predictor:
-        """The pose checkpoint `ckpt` (and detector checkpoint) on `device`. A checkpoint written before
-        predict existed has no object or camera: `data`, the dataset it was trained on, supplies them."""
+        """The pose checkpoint `ckpt` and a detector (its checkpoint, or its ONNX graph from `posenet
+        export`: a `.onnx` file runs in onnxruntime) on `device`; `onnx`, the pose network's exported
+        graph, runs in onnxruntime instead of torch (the checkpoint still gives the object and camera). A
+        checkpoint written before predict existed has no object or camera: `data`, the dataset it was
+        trained on, supplies them."""
         dev = torch.device(device)
         state = load_checkpoint(ckpt, kind="pose")
-        if detector is not None:
-            from posenet.detection.detect import load_detector  # torchvision's FCOS: only when asked for
-
-            det_model, _ = load_detector(detector, dev)
-        else:
-            det_model = None
         obj, camera = _object_and_camera(state, ckpt, data)
-        model, _ = load_model(ckpt, dev)
-        return cls(model, state, obj, camera, det_model, dev)
+        if onnx is not None:
+            network = onnx_network(onnx, state["model_config"]["input_res"])
+        else:
+            model, _ = load_model(ckpt, dev)
+            network = model
+        return cls(network, state, obj, camera, load_box_detector(detector, camera, dev), dev)
 
     def detect(self, image: np.ndarray) -> tuple[Box, float] | None:
         """The detector's best box [x, y, w, h] and score in an image of the training camera, or None."""
         if self.detector is None:
             raise PosenetError("no detector loaded: give --detector, --box or --boxes")
-        rgb = image[..., ::-1].astype(np.float32) / 255.0
-        with torch.inference_mode():
-            pred = self.detector([image_tensor(rgb).to(self.device)])[0]
-        if len(pred["scores"]) == 0:
+        found = self.detector(image[..., ::-1].astype(np.float32) / 255.0)
+        if found is None:
             return None
-        best = int(pred["scores"].argmax())
-        x0, y0, x1, y1 = (float(v) for v in pred["boxes"][best])
+        (x0, y0, x1, y1), score = found
         # detector boxes are pixel edges; posenet boxes cover pixels x .. x + w - 1 (centres at integers)
-        return (x0 + 0.5, y0 + 0.5, x1 - x0, y1 - y0), float(pred["scores"][best])
+        return (float(x0) + 0.5, float(y0) + 0.5, float(x1 - x0), float(y1 - y0)), score
 
     def __call__(self, image: np.ndarray, camera: Camera | np.ndarray, box: Box | None = None) -> Pose:
         """The pose in `image` (H x W x 3 uint8, BGR as OpenCV reads it; grey is taken too) seen by
@@ -189,7 +194,7 @@ class Predictor:
             batch |= roi_geometry(roi, self.camera.K, self.camera.size, self.output_res)
             batch = {k: v[None].to(self.device) for k, v in batch.items()}
         with _Clock(self.timings, "pose_network"), torch.inference_mode():
-            out = self.model(batch["roi_img"], batch["roi_coord2d"])
+            out = self.network(batch["roi_img"], batch["roi_coord2d"])
         with _Clock(self.timings, "solve"):
             R, t = (x[0].double().cpu().numpy() for x in decode_pose(out, batch))
             confidence = self._confidence(out, roi, R, t)
@@ -207,6 +212,56 @@ class Predictor:
         train = Camera(self.camera.K, np.zeros(5), self.camera.size)
         error = np.linalg.norm(project(points, R, t, train) - pixels, axis=1)
         return float(np.mean(error <= roi.scale / self.output_res))
+
+
+def onnx_network(path: Path, input_res: int) -> Network:
+    """The pose network's exported graph as a Network; one made for another input size is refused."""
+    from posenet.onnx_export import input_shape, onnx_session, run_onnx  # onnxruntime: only when asked for
+
+    session = _session(path, onnx_session)
+    if input_shape(session, "roi_img")[-1] != input_res:
+        raise PosenetError(f"{path} takes {input_shape(session, 'roi_img')[-1]} px RoIs; the checkpoint's "
+                           f"network takes {input_res} px: export that checkpoint")  # fmt: skip
+    return lambda roi_img, coord2d: run_onnx(session, roi_img.cpu(), coord2d.cpu())
+
+
+def load_box_detector(path: Path | None, camera: Camera, device: torch.device) -> Detector | None:
+    """A detector's best-box function: a checkpoint in torch, or a `.onnx` graph in onnxruntime (made for
+    images of the training camera's size)."""
+    if path is None:
+        return None
+    if Path(path).suffix == ".onnx":
+        from posenet.onnx_export import input_shape, onnx_session, run_detector_onnx
+
+        session = _session(path, onnx_session)
+        size = tuple(input_shape(session, "image")[:-3:-1])
+        if size != camera.size:
+            w, h = camera.size or (0, 0)
+            raise PosenetError(f"{path} takes {size[0]}x{size[1]} images; the pose network's camera is "
+                               f"{w}x{h}: export it with that checkpoint")  # fmt: skip
+        return lambda rgb: run_detector_onnx(session, rgb)
+    from posenet.detection.detect import load_detector  # torchvision's FCOS: only when asked for
+
+    model, _ = load_detector(path, device)
+
+    @torch.inference_mode()
+    def best_box(rgb: np.ndarray) -> tuple[np.ndarray, float] | None:
+        pred = model([image_tensor(rgb).to(device)])[0]
+        if len(pred["scores"]) == 0:
+            return None
+        best = int(pred["scores"].argmax())
+        return pred["boxes"][best].cpu().double().numpy(), float(pred["scores"][best])
+
+    return best_box
+
+
+def _session(path: Path, open_session: Callable[[Path], Any]) -> Any:
+    if not Path(path).is_file():
+        raise PosenetError(f"ONNX graph not found: {path}")
+    try:
+        return open_session(Path(path))
+    except Exception as exc:  # onnxruntime raises its own types for a foreign or corrupt file
+        raise PosenetError(f"{path} is not a readable ONNX graph: {str(exc).splitlines()[0]}") from exc
 
 
 def pose_flags(
