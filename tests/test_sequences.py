@@ -222,3 +222,21 @@ def test_preview_of_a_sequence_writes_its_frames_as_a_gif(tmp_path: Path):
     assert (tmp_path / "pv" / "sequence_1.png").is_file()
     result = CliRunner().invoke(main, [*args, "--sequence", "0"])
     assert result.exit_code == 1 and "[sequence] table" in result.output
+
+
+def test_motion_blur_is_the_target_centres_image_motion_over_the_exposure():
+    """Where the camera models motion blur, a frame's blur is the target centre's image velocity times the
+    exposure time: its length and direction match the centre's projected displacement over a short dt,
+    scaled to the exposure (an undrawn blur, whatever the camera's motion_blur_prob draws elsewhere)."""
+    dt = 0.2
+    gen = sequence_generator(frames=2, dt_s=dt, profile_probs={"flyby": 1.0}, pointing="fixed")
+    exposure = gen.cfg["camera"]["sensor"]["exposure_time_s"]
+    assert gen.cfg["camera"]["optics"]["motion_blur_prob"] > 0
+    for s in range(4):
+        a, b = gen.sequence(s)
+        uv = a.camera.project(np.array([a.target.t, b.target.t]))
+        shift = (uv[1] - uv[0]) * exposure / dt  # px during the exposure, by finite differences
+        assert a.imaging.motion_blur_px == pytest.approx(np.hypot(*shift), rel=1e-3, abs=1e-8)
+        assert a.imaging.motion_blur_px > 0
+        angle = np.degrees(np.arctan2(shift[1], shift[0])) % 180.0
+        assert min(abs(a.imaging.motion_blur_deg - angle), 180 - abs(a.imaging.motion_blur_deg - angle)) < 0.1
