@@ -40,7 +40,10 @@ def draw_pose(image: np.ndarray, pose: Pose, obj: ObjectModel, camera: Camera, l
         cv2.rectangle(
             out, (round(x - 0.5), round(y - 0.5)), (round(x + w - 0.5), round(y + h - 0.5)), BOX_COLOUR, lw
         )
-    if pose.R is not None and pose.t is not None and pose.t[2] > 0:
+    in_front = (
+        pose.R is not None and pose.t is not None and np.all(obj.vertices @ pose.R.T[:, 2] + pose.t[2] > 0)
+    )
+    if in_front:  # a pose reaching behind the camera has no image to draw
         uv = project(obj.vertices, pose.R, pose.t, camera)
         cv2.drawContours(out, outline(uv, obj.faces, size), -1, POSE_COLOUR, lw, cv2.LINE_AA)
         ends = np.vstack([np.zeros(3), np.eye(3) * AXIS_LENGTH * obj.diameter])

@@ -11,6 +11,7 @@ OUT/sheet.jpg           up to SHEET_TILES overlays spread over the inputs, side 
 
 from __future__ import annotations
 
+import itertools
 import json
 import time
 from collections.abc import Callable, Iterable
@@ -72,8 +73,13 @@ def run_predict(
     writer: cv2.VideoWriter | None = None
     if vis and not video_fps:
         (out / "overlays").mkdir(exist_ok=True)
-    for index, frame in enumerate(frames):
-        t0 = time.perf_counter()
+    stream = iter(frames)
+    for index in itertools.count():
+        before = {s: len(v) for s, v in predictor.timings.ms.items()}
+        t0 = time.perf_counter()  # a file or video frame is decoded by the stream, a dataset's by load_frame
+        frame = next(stream, None)
+        if frame is None:
+            break
         frame = load_frame(frame)
         predictor.timings.add("decode", time.perf_counter() - t0)
         base: dict[str, Any] = {"source": frame.name, "index": index}
@@ -86,7 +92,6 @@ def run_predict(
         else:
             cam = frame.camera or camera
             assert cam is not None
-            before = {s: len(v) for s, v in predictor.timings.ms.items()}
             box = box_for(frame, index)
             pose = NO_DETECTION if box == MISS else predictor(frame.image, cam, box)  # type: ignore[arg-type]
             if vis:
