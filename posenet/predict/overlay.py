@@ -55,26 +55,9 @@ def draw_pose(image: np.ndarray, pose: Pose, obj: ObjectModel, camera: Camera, l
     if pose.flags:
         text += " " + ",".join(pose.flags)
     scale = max(0.4, max(out.shape[:2]) / 1200)
-    cv2.putText(
-        out,
-        text.strip(),
-        (6, round(22 * scale / 0.5)),
-        cv2.FONT_HERSHEY_SIMPLEX,
-        scale,
-        (0, 0, 0),
-        lw + 2,
-        cv2.LINE_AA,
-    )
-    cv2.putText(
-        out,
-        text.strip(),
-        (6, round(22 * scale / 0.5)),
-        cv2.FONT_HERSHEY_SIMPLEX,
-        scale,
-        colour,
-        lw,
-        cv2.LINE_AA,
-    )
+    origin = (6, round(22 * scale / 0.5))
+    for ink, width in (((0, 0, 0), lw + 2), (colour, lw)):  # a dark outline, then the text
+        cv2.putText(out, text.strip(), origin, cv2.FONT_HERSHEY_SIMPLEX, scale, ink, width, cv2.LINE_AA)
     return out
 
 
