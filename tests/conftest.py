@@ -32,3 +32,19 @@ def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def spacecraft() -> TargetModel:
     """The bundled spacecraft (read-only)."""
     return load_target()
+
+
+# sequence_dataset's [sequence] table: a 20 m spacecraft, so that at 64x48 every frame shows the target
+SEQUENCE = {"frames": 4, "dt_s": 3.0, "spacecraft_diameter_m": 20.0}
+
+
+@pytest.fixture(scope="session")
+def sequence_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """3 rendezvous sequences of SEQUENCE's 4 frames (seed 0, Mitsuba, 64x48, draft): 2 in train, 1 in test.
+    Shared, read-only for the tests that use it."""
+    out = tmp_path_factory.mktemp("seq") / "sequences"
+    job = RenderJob(out=out, n=3, seed=0, backend="mitsuba", quality="draft", resolution=(64, 48),
+                    overrides={"sequence": SEQUENCE}, split_by="random",
+                    ratios=(0.67, 0.0, 0.33))  # fmt: skip
+    run_render(job, progress=False)
+    return out

@@ -22,8 +22,9 @@ from scgen.cli import main
 from scgen.dataset.export import FORMATS
 from scgen.dataset.export.output import ExportFormat
 from scgen.dataset.export.source import Source
-from scgen.dataset.layout import Layout
+from scgen.dataset.layout import Layout, read_metadata
 from scgen.io import bop
+from tests.conftest import SEQUENCE
 
 # SPEED+'s own camera.json distortion (k1, k2, p1, p2, k3), as a cam_dist the exporter must carry over
 SPEEDPLUS_DIST = [-0.22383016606510672, 0.5140979708255638, -0.0006649961199834066, -0.00021404771667484594,
@@ -71,19 +72,26 @@ def check_speedplus(root: Path, out: Path, dist: np.ndarray) -> None:
         labels = bop.read_json(out / "synthetic" / LABEL_FILES[split])
         assert [int(lab["filename"][3:9]) for lab in labels] == ids
         for lab, sid in zip(labels, ids, strict=True):
-            R, t, K, d = truth[sid]
-            q, r = np.asarray(lab["q_vbs2tango_true"]), np.asarray(lab["r_Vo2To_vbs_true"])
-            # SPEED+'s client maps body to camera by quat2dcm(q)ᵀ, quat2dcm being the passive DCM (camera to
-            # body) of the scalar-first q: the transpose of the active rotation scipy builds from q
-            A = Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()
-            expected = project(V, R, t, K, d)
-            assert np.abs(project(V, A, r, K, np.asarray(cam["distCoeffs"])) - expected).max() < 1e-6
-            transposed.append(np.abs(project(V, A.T, r, K, d) - expected).max())
-            image = out / "synthetic" / "images" / lab["filename"]
-            assert image.read_bytes() == Layout(root).rgb(split, sid, image.suffix[1:]).read_bytes()
+            transposed.append(check_label(root, out / "synthetic" / "images", cam, V, truth, lab, split, sid))
             names.append(lab["filename"])
     assert sorted(names) == sorted(p.name for p in (out / "synthetic" / "images").iterdir())
     assert max(transposed) > 10.0  # the check sees the classic bug, a transposed quaternion
+
+
+def check_label(root: Path, images: Path, cam: dict, V: np.ndarray, truth: dict, lab: dict, split: str,
+                sid: int) -> float:  # fmt: skip
+    """One SPEED+ label holds sample `sid`'s BOP pose in SPEED+'s convention and its image is the rendered
+    one; returns how far the transposed rotation's projection misses."""
+    R, t, K, d = truth[sid]
+    q, r = np.asarray(lab["q_vbs2tango_true"]), np.asarray(lab["r_Vo2To_vbs_true"])
+    # SPEED+'s client maps body to camera by quat2dcm(q)ᵀ, quat2dcm being the passive DCM (camera to
+    # body) of the scalar-first q: the transpose of the active rotation scipy builds from q
+    A = Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()
+    expected = project(V, R, t, K, d)
+    assert np.abs(project(V, A, r, K, np.asarray(cam["distCoeffs"])) - expected).max() < 1e-6
+    image = images / lab["filename"]
+    assert image.read_bytes() == Layout(root).rgb(split, sid, image.suffix[1:]).read_bytes()
+    return float(np.abs(project(V, A.T, r, K, d) - expected).max())
 
 
 def test_speedplus_poses_project_as_the_bop_poses(small_dataset: Path, tmp_path: Path):
@@ -91,6 +99,41 @@ def test_speedplus_poses_project_as_the_bop_poses(small_dataset: Path, tmp_path:
     code, lines = export(str(small_dataset), "--format", "speedplus", "--out", str(out))
     assert code == 0 and len(lines) == 1, lines
     check_speedplus(small_dataset, out, np.zeros(5))  # no cam_dist: a pinhole camera
+    assert sorted(p.name for p in out.iterdir()) == ["camera.json", "synthetic"]  # no trajectory files
+    assert sorted(p.name for p in (out / "synthetic").iterdir()) == ["images", *sorted(LABEL_FILES.values())]
+
+
+def test_a_sequence_exports_as_shirt_trajectories(sequence_dataset: Path, tmp_path: Path):
+    """A sequence dataset is written as SHIRT lays out a trajectory: per sequence a folder with
+    metadata.json and one time-ordered SPEED+ label file, the split as an index of trajectories; every
+    label holds its frame's BOP pose in SPEED+'s convention."""
+    out = tmp_path / "shirt"
+    code, lines = export(str(sequence_dataset), "--format", "speedplus", "--out", str(out))
+    assert code == 0 and len(lines) == 1 and "seq0000/synthetic/seq0000.json 4" in lines[0], lines
+    frames, dt = SEQUENCE["frames"], SEQUENCE["dt_s"]
+    index = bop.read_json(out / "trajectories.json")
+    by_split = {s: sorted({i // frames for i in ids}) for s, ids in splits(sequence_dataset).items()}
+    assert index == {Path(LABEL_FILES[s]).stem: [f"seq{k:04d}" for k in ks] for s, ks in by_split.items()}
+    assert sorted(p.name for p in out.iterdir()) == ["camera.json", "seq0000", "seq0001", "seq0002",
+                                                     "trajectories.json"]  # fmt: skip
+    cam, truth = bop.read_json(out / "camera.json"), bop_truth(sequence_dataset)
+    V = np.asarray(bop.read_model_mesh(sequence_dataset, 1).vertices)
+    rows = {int(r["sample_id"]): r for r in read_metadata(sequence_dataset)}
+    for split, seqs in by_split.items():
+        for k in seqs:
+            name = f"seq{k:04d}"
+            meta = bop.read_json(out / name / "metadata.json")
+            assert (meta["cam_step"], meta["num_images"], meta["sequence_id"]) == (dt, frames, k)
+            assert (meta["r_pri2cam_pri"], meta["q_pri2cam"]) == ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0])
+            assert meta["profile"] == rows[k * frames]["profile"]
+            labels = bop.read_json(out / name / "synthetic" / f"{name}.json")
+            ids = [k * frames + f for f in range(frames)]  # frame 0 first: time order
+            assert [int(lab["filename"][3:9]) for lab in labels] == ids
+            assert [float(rows[i]["time_s"]) for i in ids] == [f * dt for f in range(frames)]
+            images = out / name / "synthetic" / "images"
+            for lab, sid in zip(labels, ids, strict=True):
+                check_label(sequence_dataset, images, cam, V, truth, lab, split, sid)
+            assert sorted(p.name for p in images.iterdir()) == [lab["filename"] for lab in labels]
 
 
 @pytest.fixture(scope="module")

@@ -42,6 +42,7 @@ class Source:
     size: tuple[int, int]  # (width, height)
     model_name: str
     samples: tuple[Sample, ...]  # in sample order
+    sequence: dict[str, Any] | None = None  # the manifest's `sequence` (count, frames, dt_s), None if none
 
     def split(self, name: str) -> list[Sample]:
         return [s for s in self.samples if s.split == name]
@@ -71,7 +72,7 @@ def read_source(root: str | Path, progress: bool = False) -> Source:
         if scene not in scenes:
             scenes[scene] = _read(scene, "scene_camera"), _read(scene, "scene_gt_info")
         samples.append(_sample(layout, manifest["rgb_format"], image, row, *scenes[scene]))
-    return Source(layout.root, data.size, manifest["model"]["name"], tuple(samples))
+    return Source(layout.root, data.size, manifest["model"]["name"], tuple(samples), manifest.get("sequence"))
 
 
 def _read(scene: Path, name: str) -> dict[str, Any]:

@@ -4,6 +4,15 @@
     OUT/synthetic/images/img{sample_id:06d}.{png|jpg}
     OUT/synthetic/{train,validation,test}.json   [{filename, q_vbs2tango_true, r_Vo2To_vbs_true}]
 
+A sequence dataset is written as SHIRT (SLAB's rendezvous trajectories, read by the same clients) lays out
+a trajectory: one folder per sequence, its label file in time order.
+
+    OUT/camera.json
+    OUT/trajectories.json            {train, validation, test: [seq{K:04d}, ...]}: the split, by sequence
+    OUT/seq{K:04d}/metadata.json     cam_step (s), num_images, r_pri2cam_pri, q_pri2cam, sequence factors
+    OUT/seq{K:04d}/synthetic/images/img{sample_id:06d}.{png|jpg}
+    OUT/seq{K:04d}/synthetic/seq{K:04d}.json     [{filename, ...}] as above, frame 0 first
+
 SPEED+'s client (speedplusbaseline's `project_keypoints`) projects a body point X to the camera frame as
 quat2dcm(q)ᵀ X + r, and its quat2dcm(q) is the direction cosine matrix of the camera (VBS) frame to the
 body (Tango) frame: Rᵀ of the active rotation R(q). So q is the scalar-first quaternion of BOP's R
@@ -29,6 +38,9 @@ LABEL_FILES = {"train": "train.json", "val": "validation.json", "test": "test.js
 # length in metres. We write SPEED+'s own pitch, 5.86 µm, as a nominal value and the metric focal length
 # that gives the same K (fx_m / ppx = fx_px): nothing in the images depends on them.
 NOMINAL_PIXEL_PITCH_M = 5.86e-6
+TRAJECTORY_INDEX = "trajectories.json"  # a sequence export's trajectory folders per split
+# SHIRT's servicer-to-camera offset: scgen's camera is the chaser's body frame, so it is the identity
+SERVICER_TO_CAMERA = {"r_pri2cam_pri": [0.0, 0.0, 0.0], "q_pri2cam": [1.0, 0.0, 0.0, 0.0]}
 
 
 def pose_label(R: np.ndarray, t: np.ndarray) -> tuple[list[float], list[float]]:
@@ -59,9 +71,61 @@ def camera(source: Source) -> dict[str, Any]:
             "cameraMatrix": K.tolist(), "distCoeffs": first.dist.tolist()}  # fmt: skip
 
 
+def trajectory_name(sequence_id: int) -> str:
+    return f"seq{sequence_id:04d}"
+
+
+def trajectories(source: Source) -> dict[int, list[Sample]]:
+    """A sequence dataset's frames per sequence id, each in time order; a sequence whose frames are not
+    0..frames-1 of one split is refused (`scgen validate` names why)."""
+    frames: dict[int, list[Sample]] = {}
+    for s in source.samples:
+        frames.setdefault(int(s.metadata["sequence_id"]), []).append(s)
+    for seq, samples in frames.items():
+        samples.sort(key=lambda s: int(s.metadata["frame"]))
+        if [int(s.metadata["frame"]) for s in samples] != list(range(len(samples))):
+            raise ScgenError(f"sequence {seq}: frames {[s.metadata['frame'] for s in samples]} are not "
+                             "0, 1, ... (run `scgen validate`)")  # fmt: skip
+        if len({s.split for s in samples}) > 1:
+            raise ScgenError(f"sequence {seq}: frames in more than one split (run `scgen validate`)")
+    return dict(sorted(frames.items()))
+
+
+def trajectory_metadata(source: Source, samples: list[Sample]) -> dict[str, Any]:
+    """A trajectory's metadata.json: SHIRT's keys (frame step, frame count, servicer-to-camera offset),
+    then the sequence's id and factors."""
+    assert source.sequence is not None
+    row = samples[0].metadata
+    return {"cam_step": float(source.sequence["dt_s"]), "num_images": len(samples), **SERVICER_TO_CAMERA,
+            "sequence_id": int(row["sequence_id"]), "profile": row["profile"],
+            "attitude_mode": row["attitude_mode"], "altitude_km": float(row["altitude_km"])}  # fmt: skip
+
+
+def write_trajectories(source: Source, out: Path, images: str) -> dict[str, int]:
+    """Write a sequence dataset as SHIRT's trajectories into `out` (camera.json written); returns the
+    number of images per label file."""
+    index: dict[str, list[str]] = {Path(name).stem: [] for name in LABEL_FILES.values()}
+    counts = {}
+    for seq, samples in trajectories(source).items():
+        name = trajectory_name(seq)
+        index[Path(LABEL_FILES[samples[0].split]).stem].append(name)
+        image_dir = out / name / DOMAIN / "images"
+        image_dir.mkdir(parents=True)
+        for s in samples:
+            place_image(s.image, image_dir / image_name(s), images)
+        (out / name / "metadata.json").write_text(dumps(trajectory_metadata(source, samples)))
+        (out / name / DOMAIN / f"{name}.json").write_text(dumps([label(s) for s in samples]))
+        counts[f"{name}/{DOMAIN}/{name}.json"] = len(samples)
+    (out / TRAJECTORY_INDEX).write_text(dumps(index))
+    return counts
+
+
 def write(source: Source, out: Path, images: str) -> dict[str, int]:
-    """Write the SPEED+ layout into `out`; returns the number of images per label file."""
+    """Write the SPEED+ layout into `out` (SHIRT's for a sequence dataset); returns the number of images
+    per label file."""
     (out / "camera.json").write_text(dumps(camera(source)))
+    if source.sequence:
+        return write_trajectories(source, out, images)
     image_dir = out / DOMAIN / "images"
     image_dir.mkdir(parents=True)
     counts = {}
@@ -76,8 +140,10 @@ def write(source: Source, out: Path, images: str) -> dict[str, int]:
 
 FORMAT = ExportFormat(
     name="speedplus",
-    summary="SPEED+'s camera.json, images and train/validation/test labels",
-    layout="OUT/camera.json, OUT/synthetic/images/, OUT/synthetic/{train,validation,test}.json",
+    summary="SPEED+'s camera.json, images and train/validation/test labels (SHIRT's trajectories for "
+    "a sequence dataset)",
+    layout="OUT/camera.json, OUT/synthetic/images/, OUT/synthetic/{train,validation,test}.json; sequences: "
+    "OUT/seqK/{metadata.json,synthetic/images/,synthetic/seqK.json}, OUT/trajectories.json",
     write=write,
     writes_images=True,
 )
