@@ -38,6 +38,7 @@ from posenet.predict.inputs import predict_inputs
 from posenet.predict.run import FORMATS as PREDICT_FORMATS
 from posenet.predict.run import run_predict
 from posenet.ransac import PNP_LABELS, PNP_METHODS
+from posenet.sequences import per_sequence, sequence_table
 from posenet.train import train as run_train
 from posenet.viz import heatmap_panel, overlay_panel
 from scgen.cli import one_line_errors, preset_intrinsics
@@ -174,7 +175,9 @@ def eval_cmd(
 
     For an object with symmetries (models_info), ADD is ADD-S and the rotation error is also given as
     the smallest over the symmetric poses of the ground truth. With --pnp both, each figure is given for
-    Patch-PnP and PnP-RANSAC side by side.
+    Patch-PnP and PnP-RANSAC side by side. On a split of rendezvous sequences, a table per sequence adds
+    its error along time and the frame-to-frame jitter of the estimate beside the truth's (--json:
+    `sequences`).
     """
     methods = PNP_METHODS if pnp == "both" else (pnp,)
     if bop_csv is not None and len(methods) > 1:
@@ -209,6 +212,9 @@ def eval_cmd(
     columns = ["value"] if methods == ("patch",) else [PNP_LABELS[m] for m in methods]
     rows = summary_rows(summaries, keys=set().union(*summaries))
     click.echo(format_table([f"{variant} on {split}", *columns], rows))
+    for m, figures in per_sequence(data, split, results).items():  # a sequence dataset: the tracker baseline
+        results[m].summary["sequences"] = figures
+        click.echo(sequence_table(figures, f"sequence ({PNP_LABELS[m]})" if len(methods) > 1 else "sequence"))
     records = [{**json_record(r), "pnp": m} for m, res in results.items() for r in res.records]
     write_output(predictions, "".join(json.dumps(r) + "\n" for r in records))
     if json_path is not None:

@@ -12,6 +12,7 @@ from typing import Any
 from scgen.errors import ScgenError
 from scgen.io import bop
 from scgen.io.bop import NOT_A_FOLDER, not_a_dataset, read_json
+from scgen.io.sequence_frames import METADATA_FILE
 
 MANIFEST = "scgen.json"
 # 2: depth by default, scene_gt_info in bop_toolkit's conventions, models_eval/, test targets
@@ -87,7 +88,7 @@ class Layout:
 
     @property
     def metadata_path(self) -> Path:
-        return self.root / "metadata.csv"
+        return self.root / METADATA_FILE
 
     @property
     def splits_path(self) -> Path:

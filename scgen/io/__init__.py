@@ -3,9 +3,10 @@ reads scgen datasets through (tests/test_layering.py holds it to that).
 
 `bop` (the BOP format: file names, millimetres, the JSON entries), `atomic` (writes that are whole or
 absent), `exr` (xyz maps in OpenEXR), `image_file` (decoding images, and why one cannot be read),
-`buffers` (what a renderer hands to annotation and the writer), `yaml_file` (YAML configs with YAML
-1.2's floats, 1e-3 included), `output_path` (the one rule for an output path) and `parent_watch` (worker
-pools that end with their parent). The names below are posenet's interface.
+`buffers` (what a renderer hands to annotation and the writer), `sequence_frames` (which rendezvous
+frame each image is, from metadata.csv), `yaml_file` (YAML configs with YAML 1.2's floats, 1e-3
+included), `output_path` (the one rule for an output path) and `parent_watch` (worker pools that end with
+their parent). The names below are posenet's interface.
 """
 
 from scgen.errors import ScgenError
@@ -21,12 +22,15 @@ from scgen.io.output_path import (
     make_output_folder,
     write_output,
 )
+from scgen.io.sequence_frames import METADATA_FILE, SequenceFrame, read_sequence_frames
 from scgen.io.yaml_file import NUMBER_FORM, load_yaml
 
 __all__ = [
+    "METADATA_FILE",
     "NOT_A_FOLDER",
     "NUMBER_FORM",
     "ScgenError",
+    "SequenceFrame",
     "atomic_write_bytes",
     "atomic_write_text",
     "bop",
@@ -37,6 +41,7 @@ __all__ = [
     "make_output_folder",
     "not_a_dataset",
     "read_image",
+    "read_sequence_frames",
     "read_xyz_exr",
     "why_unreadable",
     "write_output",

@@ -1,0 +1,113 @@
+"""`posenet eval` on a split of rendezvous sequences: per-sequence error along time and the frame-to-frame
+jitter of the estimate beside the truth's. The jitter is checked on physics (zero for motion at constant
+velocity and rate, the noise's known RMS for white noise) and end to end on a real sequence render."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from posenet_helpers import tiny_pose_checkpoint
+from scipy.spatial.transform import Rotation
+
+from posenet.cli import main
+from posenet.sequences import rotation_jitter_deg, sequence_figures, translation_jitter_m
+from scgen.dataset.layout import read_metadata
+from scgen.io import SequenceFrame, read_sequence_frames
+from tests.conftest import SEQUENCE
+
+RNG = np.random.default_rng(0)
+
+
+def constant_motion(n: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """n poses at constant velocity and constant rate in the camera frame: R_k = exp(k dt [w]x) R_0."""
+    t = np.array([0.1, -0.2, 5.0]) + np.outer(np.arange(n) * dt, [0.02, 0.01, -0.05])
+    turn = Rotation.from_rotvec(np.radians([1.0, -2.0, 0.5]) * dt)
+    R0 = Rotation.from_rotvec([0.3, 1.2, -0.4])
+    R = np.array([(turn**k * R0).as_matrix() for k in range(n)])
+    return R, t
+
+
+def test_constant_motion_has_no_jitter_and_white_noise_has_its_rms():
+    """Second differences vanish at constant velocity and rate; white noise of σ per axis gives
+    sqrt(1 + 4 + 1) σ per axis, sqrt(18) σ over three axes, for translation and (to first order) rotation."""
+    n, sigma_t, sigma_r = 2000, 0.01, np.radians(0.5)
+    R, t = constant_motion(n, 3.0)
+    ok = np.ones(n, dtype=bool)
+    assert translation_jitter_m(t, ok) < 1e-12 and rotation_jitter_deg(R, ok) < 1e-6
+    noisy_t = t + RNG.normal(0.0, sigma_t, t.shape)
+    noisy_R = Rotation.from_rotvec(RNG.normal(0.0, sigma_r, (n, 3))).as_matrix() @ R
+    assert translation_jitter_m(noisy_t, ok) == pytest.approx(np.sqrt(18) * sigma_t, rel=0.05)
+    assert rotation_jitter_deg(noisy_R, ok) == pytest.approx(np.degrees(np.sqrt(18) * sigma_r), rel=0.05)
+    # a failed frame drops the triples it is in; with none left there is no figure
+    ok[1] = False
+    assert (
+        translation_jitter_m(noisy_t[:3], ok[:3]) is None and rotation_jitter_deg(noisy_R[:3], ok[:3]) is None
+    )
+    assert translation_jitter_m(t, ok) < 1e-12
+
+
+def test_sequence_figures_orders_frames_and_summarises_each_sequence():
+    """Records in any order become per-sequence series in time order, with medians, maxima, failures."""
+    R, t = constant_motion(6, 2.0)
+    frames = {(7, 70 + k): SequenceFrame(7, k, 2.0 * k) for k in range(6)}
+    truth = {(7, 70 + k): (R[k], t[k]) for k in range(6)}
+    records = []
+    for k in (3, 0, 4, 1, 2):  # out of time order on purpose; frame 5 not evaluated (target not visible)
+        failed = k == 4
+        pose = {"R": R[k].ravel().tolist(), "t": (t[k] + [0.0, 0.0, 0.01 * k]).tolist()}
+        errors = {"re_deg": float(k), "te_m": 0.01 * k}
+        if failed:
+            pose, errors = {"R": None, "t": None}, {"re_deg": np.inf, "te_m": np.inf}
+        records.append({"scene_id": 7, "im_id": 70 + k, **pose, **errors})
+    (fig,) = sequence_figures(records, truth, frames)
+    assert (fig["sequence_id"], fig["frames"], fig["evaluated"], fig["failed"]) == (7, 6, 5, 1)
+    assert [s["frame"] for s in fig["series"]] == list(range(6))
+    assert [s["time_s"] for s in fig["series"]] == [0.0, 2.0, 4.0, 6.0, 8.0, 10.0]
+    assert fig["series"][4]["re_deg"] is None and fig["series"][5]["te_m"] is None
+    assert fig["series"][3]["te_m"] == pytest.approx(0.03)
+    assert (fig["re_deg_median"], fig["re_deg_max"]) == (1.5, 3.0)
+    assert fig["jitter_t_m"] < 1e-12  # a depth error growing linearly is still constant velocity
+    assert fig["jitter_t_m_truth"] < 1e-12 and fig["jitter_rot_deg_truth"] < 1e-6
+
+
+def test_independent_frames_have_no_sequence_frames(tmp_path: Path):
+    (tmp_path / "metadata.csv").write_text("sample_id,split,scene_id,im_id\n0,train,0,0\n")
+    assert read_sequence_frames(tmp_path) == {} and read_sequence_frames(tmp_path / "none") == {}
+
+
+def test_eval_on_a_sequence_split_reports_each_sequence(
+    sequence_dataset: Path, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
+):
+    """A tiny checkpoint on a real render: one table row and one `sequences` entry per sequence of the
+    split, its frames in time order, and the truth's jitter (the rendered dynamics) far below the
+    estimate's."""
+    ckpt = tiny_pose_checkpoint(sequence_dataset, tmp_path_factory, "seq_run")
+    out = tmp_path / "eval.json"
+    args = ["eval", "--data", sequence_dataset, "--ckpt", ckpt, "--split", "train", "--json", out]
+    res = CliRunner().invoke(main, [str(a) for a in [*args, "--workers", 0]])
+    assert res.exit_code == 0, res.output
+    rows = [r for r in read_metadata(sequence_dataset) if r["split"] == "train"]
+    seqs = sorted({int(r["sequence_id"]) for r in rows})
+    assert len(seqs) == 2
+    lines = res.output.splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("sequence "))
+    assert "t jitter (m)" in lines[head] and "rot jitter truth (deg)" in lines[head]
+    assert lines[head + 2 + len(seqs)].startswith("re, te: error over the frames")
+    assert [int(ln.split()[0]) for ln in lines[head + 2 : head + 2 + len(seqs)]] == seqs
+    figures = json.loads(out.read_text())["sequences"]
+    assert [f["sequence_id"] for f in figures] == seqs
+    frames, dt = SEQUENCE["frames"], SEQUENCE["dt_s"]
+    for f in figures:
+        assert f["frames"] == f["evaluated"] == frames and len(f["series"]) == frames
+        assert [s["time_s"] for s in f["series"]] == [k * dt for k in range(frames)]
+        errors = [s["re_deg"] for s in f["series"]]
+        assert f["re_deg_median"] == pytest.approx(np.median(errors)) and f["re_deg_max"] == max(errors)
+        assert f["jitter_t_m_truth"] < 1e-4 and f["jitter_rot_deg_truth"] < 1e-2
+        assert (
+            f["jitter_t_m"] > 100 * f["jitter_t_m_truth"]
+            and f["jitter_rot_deg"] > 100 * f["jitter_rot_deg_truth"]
+        )
