@@ -365,8 +365,13 @@ def export_cmd(
     if detector is not None:
         export_detector_graph(detector, detector_onnx, state, ckpt)  # type: ignore[arg-type]
         click.echo(f"onnx: {detector_onnx} (the detector's best box, opset {OPSET})")
-    export_onnx(model, onnx_path)
-    diff = max_difference(model, onnx_session(onnx_path))
+    with tqdm(total=2, desc="export", unit="stage", dynamic_ncols=True, leave=False) as bar:
+        bar.set_postfix_str("tracing the network, writing the graph")
+        export_onnx(model, onnx_path)
+        bar.update()
+        bar.set_postfix_str("onnxruntime against torch")
+        diff = max_difference(model, onnx_session(onnx_path))
+        bar.update()
     click.echo(f"onnx: {onnx_path} (opset {OPSET}, dynamic batch); max |onnxruntime - torch| = {diff:.2e}")
 
 

@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+import time
+
+import posenet
 
 TRAINING_MODULES = ("torch", "torchvision", "timm", "albumentations", "tensorboard")
 INSTALL_HINT = "pip install 'scgen[train]'"
@@ -22,6 +25,8 @@ def main() -> None:
     missing = missing_training_modules()
     if missing:
         sys.exit(f"Error: posenet needs {', '.join(missing)}, not installed here: {INSTALL_HINT}")
+    tic = time.perf_counter()
     from posenet.cli import main as cli
 
+    posenet.IMPORT_SECONDS = time.perf_counter() - tic  # printed in train's start-up line
     cli()

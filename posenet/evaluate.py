@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 from torch.utils.data import DataLoader
+from tqdm import tqdm
 
 from posenet.bench import dummy_inputs, measure_latency_ms
 from posenet.checkpoint import load_checkpoint
@@ -115,7 +116,7 @@ def predict(
     geometry = [torch.from_numpy(a).to(device) for a in (obj.pm_points, obj.vertices, obj.symmetries)]
     results: dict[str, Predictions] = {m: ([], {}) for m in methods}
     sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
-    for batch in loader:
+    for batch in tqdm(loader, desc="eval", unit="batch", dynamic_ncols=True, leave=False):
         b = {k: v.to(device) for k, v in batch.items()}
         tic = time.perf_counter()
         out = model(b["roi_img"], b["roi_coord2d"])

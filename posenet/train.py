@@ -27,11 +27,13 @@ from torch.utils.data import DataLoader
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
+import posenet
 from posenet.amp import Precision
 from posenet.budget import PROBE_STEPS, TimeBudget
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
 from posenet.config import OptimConfig, TrainConfig, config_from_dict
 from posenet.data import EpochSampler, PoseDataset, open_split
+from posenet.data.layout import scan_split
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.losses import LOSS_TERMS, PmObject, pose_losses
@@ -278,6 +280,28 @@ class _Run:
     stop: int  # the step this invocation stops at
     budget: TimeBudget | None = None  # --minutes: the schedule's total, fitted while the run goes
     weight_spread: float = 0.0  # largest weight difference between DDP processes, measured at the stop
+    startup: StartUp | None = None  # rank 0: where the set-up's seconds went, printed with the first step
+
+
+class StartUp:
+    """Where a run's first minutes go: each set-up phase's seconds (`lap`), then the first step's wait for
+    the loader (its processes starting) and its compute; rank 0 prints them."""
+
+    def __init__(self) -> None:
+        self.begin = self.last = time.perf_counter()
+        self.phases: dict[str, float] = {}
+        if posenet.IMPORT_SECONDS is not None:  # the `posenet` command: its imports came first
+            self.phases["imports (torch, timm)"] = posenet.IMPORT_SECONDS
+            self.begin -= posenet.IMPORT_SECONDS
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.phases[name] = now - self.last
+        self.last = now
+
+    def line(self) -> str:
+        spent = ", ".join(f"{k} {v:.1f} s" for k, v in self.phases.items())
+        return f"start-up {time.perf_counter() - self.begin:.1f} s: {spent}"
 
 
 def _set_up(
@@ -295,8 +319,10 @@ def _set_up(
     (resumed from OUT/last.pt with `resume`); nothing is written. With a `budget`, the schedule's total
     is the budget's, refitted as the run goes."""
     o = cfg.optim
+    clock = StartUp()
     _refuse(out, o.batch_size, resume, world)
     dataset = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
+    clock.lap("data (scan, object model)")
     state = load_checkpoint(out / LAST, kind="pose") if resume else None
     # a resumed run keeps the schedule it started with (a time budget's fitted one included)
     total = (state or {}).get("schedule_steps") or o.epochs * steps_per_epoch(len(dataset), o, world)
@@ -309,9 +335,12 @@ def _set_up(
     step = (
         _restore(state, out / LAST, model, optimizer, scheduler, precision, cfg.data.obj_id) if state else 0
     )
+    clock.lap("network" + (f" and {LAST}" if state else ""))
     if rank == 0:
-        tqdm.write(f"precision: {precision.label} (optim.amp {o.amp})")
-    return _Run(
+        for line in summary_lines(data, cfg, len(dataset), sampler.steps_per_epoch, total, step, stop, device,
+                                  precision, world, budget):  # fmt: skip
+            tqdm.write(line)
+    run = _Run(
         cfg=cfg,
         model=model,
         net=DistributedDataParallel(model) if world > 1 else model,
@@ -328,6 +357,53 @@ def _set_up(
         stop=stop,
         budget=budget,
     )
+    clock.lap("loader")
+    run.startup = clock if rank == 0 else None
+    return run
+
+
+def summary_lines(
+    data: Path,
+    cfg: TrainConfig,
+    n_train: int,
+    per_epoch: int,
+    total: int,
+    step: int,
+    stop: int,
+    device: torch.device,
+    precision: Precision,
+    world: int,
+    budget: TimeBudget | None,
+) -> list[str]:
+    """What a run is about to do, before its first step: the images per split, steps per epoch, the
+    schedule, the device and precision."""
+    o, d = cfg.optim, cfg.data
+    counts = []
+    for split in ("val", "test"):
+        try:
+            counts.append(f"{split} {len({i.im_id for i in scan_split(data, split, d.obj_id)})}")
+        except PosenetError:
+            counts.append(f"{split} none")
+    schedule = (
+        f"fitted to {budget.seconds / 60:g} min while it runs"
+        if budget
+        else f"{o.epochs} epochs = {total} steps"
+    )
+    threads = torch.get_num_threads() if device.type == "cpu" else None
+    return [
+        f"data: {n_train} training instances of object {d.obj_id} in {data} (train split; "
+        + ", ".join(counts)
+        + " images, not read in training)",
+        f"schedule: batch {o.batch_size}, {per_epoch} steps per epoch, {schedule}, lr {o.lr:g} (warmup "
+        f"{o.warmup_iters} steps, cosine from {o.anneal_point:.0%}); "
+        + (f"resuming at step {step}, " if step else "")
+        + f"this run stops at step {stop}",
+        f"device: {device.type}"
+        + (f" ({threads} threads)" if threads else "")
+        + f", {d.workers} loader processes"
+        + (f", {world} DDP processes" if world > 1 else "")
+        + f"; precision: {precision.label} (optim.amp {o.amp})",
+    ]
 
 
 def _refuse(out: Path, batch_size: int, resume: bool, world: int) -> None:
@@ -506,8 +582,16 @@ def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
     processes and logged with the images the step took over all processes (the global batch)."""
     tic = time.perf_counter()
     for batch in run.loader:
+        if run.startup is not None:
+            run.startup.lap(
+                f"first batch {len(batch['roi_img'])} images ({run.cfg.data.workers} loader processes)"
+            )
         scale = run.precision.loss_scale()
         values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm, run.cfg, run.precision)
+        if run.startup is not None:  # what the first minutes went on, once
+            run.startup.lap("first step")
+            tqdm.write(run.startup.line())
+            run.startup = None
         lr = run.optimizer.param_groups[0]["lr"]
         if run.precision.loss_scale() >= scale:
             # the schedule follows the optimizer's updates: fp16's scaler skips the first ones while it

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import torch
 import trimesh
+from tqdm import tqdm
 
 from posenet.checkpoint import load_checkpoint
 from posenet.config import config_from_dict
@@ -99,7 +100,7 @@ def heatmap_panel(data: Path, split: str, ckpts: list[Path], ids: list[int]) -> 
         cfg = config_from_dict(state["config"])
         ds = open_split(data, split, cfg.data, model.config, train=False, image_ids=set(ids))
         maps, rois = {}, {}
-        for k in range(len(ds)):
+        for k in tqdm(range(len(ds)), desc="features", unit="img", dynamic_ncols=True, leave=False):
             item = ds[k]
             im_id = int(item["key"][1])
             roi_img, coord = item["roi_img"][None].to(device), item["roi_coord2d"][None].to(device)

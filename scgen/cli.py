@@ -424,9 +424,10 @@ def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | No
 @click.option("--resolution", default="320x240", show_default=True, help="Image size WxH.")
 @click.option("--quality", default="draft", show_default=True, help="draft | default | high.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing OUT/preview.png.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
 @one_line_errors(ScgenError)
 def preview(out, n, backend, seed, model_path, keep_scale, config_path, camera, resolution, quality,
-            overwrite) -> None:  # fmt: skip
+            overwrite, quiet) -> None:  # fmt: skip
     """Render n samples in memory, as render would, and write OUT/preview.png: RGB, masks, xyz, factors."""
     from scgen.generator import Generator
     from scgen.io.output_path import check_output
@@ -447,7 +448,7 @@ def preview(out, n, backend, seed, model_path, keep_scale, config_path, camera, 
         quality=quality,
     )
     path = Path(out) / "preview.png"
-    save_png(build_preview(generator, n), path)
+    save_png(build_preview(generator, n, progress=not quiet), path)
     click.echo(f"wrote {path} ({n} samples, {backend})")
 
 

@@ -15,6 +15,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader
 from torchvision.models.detection import FCOS
+from tqdm import tqdm
 
 from posenet.checkpoint import load_checkpoint
 from posenet.data.boxes import miss_entry
@@ -52,7 +53,8 @@ def detect(model: FCOS, dataset: DetectionDataset, device: torch.device) -> list
     """The best box of each image of the dataset, one image per forward (the batch-1 latency is its time)."""
     model.eval()
     out = []
-    for i, (images, _) in enumerate(DataLoader(dataset, batch_size=1, collate_fn=collate)):
+    loader = DataLoader(dataset, batch_size=1, collate_fn=collate)
+    for i, (images, _) in enumerate(tqdm(loader, desc="detect", unit="img", dynamic_ncols=True, leave=False)):
         tic = time.perf_counter()
         pred = model([im.to(device) for im in images])[0]
         if device.type == "cuda":
