@@ -40,17 +40,23 @@ def log(run: Path) -> list[dict]:
 
 @pytest.mark.parametrize("mode", ["bf16", "fp16"])
 def test_mixed_precision_losses_follow_float32(runs: dict[str, Path], mode: str) -> None:
-    """Same seed, same batches: each step's total loss stays within 2 % of float32's (measured: 1.8 %), and
-    each term's mean over the steps follows float32's: the dense terms (coord, mask, region, z) within 5 %
+    """Same seed, same batches. The first step's total loss (the same weights: only the forward's rounding
+    differs) within 1 % of float32's, a few of bf16's unit roundoffs (2^-8 = 0.4 %; measured 0.12 % on two
+    machines); after it the two runs' weights part, so each later step within 5 % (on a random-init
+    network the rounding moves single terms far: below) and the mean over the steps within 2 % (measured
+    0.3 %; the worst single step was 1.8 % on one machine and 2.2 % on another, whose bf16 kernels differ).
+    Each term's mean over the steps follows float32's: the dense terms (coord, mask, region, z) within 5 %
     (measured: 1.7 %), pm and cent within 25 % (measured: 5 %); and they differ (autocast was on).
-    Single terms at single steps are not compared: on a random-init network low-precision rounding moves
-    some of them far: pm by up to 27 % in bf16 (it hangs on the six rotation and three
-    SITE outputs of a random FC), and coord by 11.6 % at bf16's first step (the 24-image set rendered
-    with the Moon sky and near-view suns), where fp16 moved it by 1.3 %."""
+    Single terms at single steps are not compared: pm moves by up to 27 % in bf16 (it hangs on the six
+    rotation and three SITE outputs of a random FC), and coord by 11.6 % at bf16's first step (the
+    24-image set rendered with the Moon sky and near-view suns), where fp16 moved it by 1.3 %."""
     full, mixed = log(runs["off"]), log(runs[mode])
     assert [r["step"] for r in mixed] == list(range(1, STEPS + 1))
+    assert mixed[0]["loss"] == pytest.approx(full[0]["loss"], rel=0.01)
     for a, b in zip(full, mixed, strict=True):
-        assert b["loss"] == pytest.approx(a["loss"], rel=0.02), a["step"]
+        assert b["loss"] == pytest.approx(a["loss"], rel=0.05), a["step"]
+    mean_full, mean_mixed = (sum(r["loss"] for r in rows) / STEPS for rows in (full, mixed))
+    assert mean_mixed == pytest.approx(mean_full, rel=0.02)
     for key, rel in (
         ("coord", 0.05),
         ("mask", 0.05),
