@@ -41,8 +41,8 @@ def log(run: Path) -> list[dict]:
 @pytest.mark.parametrize("mode", ["bf16", "fp16"])
 def test_mixed_precision_losses_follow_float32(runs: dict[str, Path], mode: str) -> None:
     """Same seed, same batches. The first step's total loss (the same weights: only the forward's rounding
-    differs) within 1 % of float32's, a few of bf16's unit roundoffs (2^-8 = 0.4 %; measured 0.12 % on two
-    machines); after it the two runs' weights part, so each later step within 5 % (on a random-init
+    differs) within 1 % of float32's, a few of bf16's unit roundoffs (2^-8 = 0.4 %; measured 0.12 %); after
+    it the two runs' weights part, so each later step within 5 % (on a random-init
     network the rounding moves single terms far: below) and the mean over the steps within 2 % (measured
     0.3 %; the worst single step was 1.8 % on one machine and 2.2 % on another, whose bf16 kernels differ).
     Each term's mean over the steps follows float32's: the dense terms (coord, mask, region, z) within 5 %
