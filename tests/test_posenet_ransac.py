@@ -52,7 +52,7 @@ def test_eval_pnp_both_sets_ransac_beside_patch(
     args = ["eval", "--data", dataset_dir, "--ckpt", ckpt, "--json", out, "--workers", 0, "--pnp", "both"]
     res = CliRunner().invoke(main, [str(a) for a in args])
     assert res.exit_code == 0, res.output
-    header = res.output.splitlines()[1]
+    header = res.stdout.splitlines()[1]  # the table under "boxes: ..."; the progress bar is on stderr
     assert "Patch-PnP" in header and "PnP-RANSAC" in header and "PnP failed" in res.output
     summary = json.loads(out.read_text())
     patch, ransac = summary["patch"], summary["ransac"]
@@ -80,5 +80,5 @@ def test_eval_pnp_both_sets_ransac_beside_patch(
     ]
     res = CliRunner().invoke(main, [str(a) for a in args])
     assert res.exit_code == 0, res.output
-    assert "gdrnet PnP-RANSAC" in res.output.splitlines()[1]
+    assert "gdrnet PnP-RANSAC" in res.stdout.splitlines()[1]  # the progress bars are on stderr
     assert np.isfinite(patch["te_m"])
