@@ -83,12 +83,17 @@ class EvalResult:
 def load_model(ckpt: Path, device: torch.device) -> tuple[PoseNet, dict[str, Any]]:
     """The network of a checkpoint, in eval mode on `device`, and the checkpoint itself."""
     state = load_checkpoint(ckpt, kind="pose")
+    return model_from_state(state, ckpt, device), state
+
+
+def model_from_state(state: dict[str, Any], ckpt: Path, device: torch.device) -> PoseNet:
+    """The network of an already loaded pose checkpoint `state` (read from `ckpt`), in eval mode."""
     model = create_model(**state["model_config"])
     try:
         model.load_state_dict(state["model"])
     except RuntimeError as exc:
         raise PosenetError(f"checkpoint {ckpt} does not match its own model configuration") from exc
-    return model.to(device).eval(), state
+    return model.to(device).eval()
 
 
 Predictions = tuple[list[dict[str, Any]], dict[str, list[float]]]  # records, and each error's list

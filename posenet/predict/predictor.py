@@ -27,7 +27,7 @@ from posenet.data.dataset import image_tensor, roi_geometry, roi_image
 from posenet.data.layout import image_size, scan_split
 from posenet.data.object_model import ObjectModel, load_object_model, object_from_record
 from posenet.errors import PosenetError
-from posenet.evaluate import load_model
+from posenet.evaluate import model_from_state
 from posenet.geometry import decode_pose
 from posenet.losses import mask_probability
 from posenet.predict.camera import (
@@ -154,8 +154,7 @@ class Predictor:
         if onnx is not None:
             network = onnx_network(onnx, state["model_config"]["input_res"])
         else:
-            model, _ = load_model(ckpt, dev)
-            network = model
+            network = model_from_state(state, ckpt, dev)  # the checkpoint is read once
         return cls(network, state, obj, camera, load_box_detector(detector, camera, dev), dev)
 
     def detect(self, image: np.ndarray) -> tuple[Box, float] | None:
@@ -209,8 +208,7 @@ class Predictor:
         points, pixels = correspondences(xyz, visible, self.obj.extent, roi.center, roi.scale)
         if len(points) < MIN_POINTS:
             return 0.0
-        train = Camera(self.camera.K, np.zeros(5), self.camera.size)
-        error = np.linalg.norm(project(points, R, t, train) - pixels, axis=1)
+        error = np.linalg.norm(project(points, R, t, self.camera) - pixels, axis=1)  # a pinhole camera
         return float(np.mean(error <= roi.scale / self.output_res))
 
 
