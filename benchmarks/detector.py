@@ -1,9 +1,10 @@
 """Detector benchmark: train a preset, score its boxes per factor group, and pose with detected vs GT boxes.
 
-    python benchmarks/detector.py --data DIR --out RUN [--config cpu] [--max-steps N] [--groups-n 50]
+    python benchmarks/detector.py --data DIR --out RUN [--config cpu] [--minutes 40] [--groups-n 50]
                                   [--pose-ckpt POSE/last.pt]
 
-Trains `posenet train-detector`'s loop into RUN (resumes when RUN/last.pt exists), then scores
+Trains `posenet train-detector`'s loop into RUN (resumes when RUN/last.pt exists; with --minutes, a new
+run fitted to that wall time), then scores
 RUN/best.pt (RUN/last.pt without a val split) against `bbox_visib` on the whole test split and on each
 factor group of `scgen.dataset.stats.sample_groups` (occlusion, distance, background), times the detector at
 batch 1 (median per-image forward over the test split, current device), checks the floors (FLOOR_*) and
@@ -30,10 +31,10 @@ from posenet.train import LAST
 from scgen.dataset.stats import sample_groups
 from scgen.io.atomic import atomic_write_text
 
-# issue 21's floors for the CPU preset on the test split (and its training takes <= 20 min on 2 cores)
-FLOOR_MEAN_IOU = 0.75  # with bbox_visib, a miss counting 0
-FLOOR_IOU50 = 0.95  # share of images at IoU >= 0.5
-FLOOR_MISSES = 0.02  # share of images without a detection
+# issue 50's floors for the CPU preset on the test split, its training <= 60 min on 2 cores
+FLOOR_MEAN_IOU = 0.85  # with bbox_visib, a miss counting 0
+FLOOR_IOU50 = 0.98  # share of images at IoU >= 0.5
+FLOOR_MISSES = 0.01  # share of images without a detection
 
 
 def parse_args() -> argparse.Namespace:
@@ -78,7 +79,7 @@ def pose_side_by_side(gt: EvalResult, det: EvalResult, groups: dict[str, dict[st
 
 
 def floor_line(m: dict[str, float]) -> str:
-    """Issue 21's box floors on the whole test split: mean IoU, share at IoU >= 0.5, misses."""
+    """Issue 50's box floors on the whole test split: mean IoU, share at IoU >= 0.5, misses."""
     checks = [
         (f"mean IoU {m['mean_iou']:.3f} >= {FLOOR_MEAN_IOU}", m["mean_iou"] >= FLOOR_MEAN_IOU),
         (f"IoU>=0.5 {100 * m['iou50']:.1f} % >= {100 * FLOOR_IOU50:.0f} %", m["iou50"] >= FLOOR_IOU50),
@@ -91,8 +92,11 @@ def floor_line(m: dict[str, float]) -> str:
 def main() -> None:
     args = parse_args()
     cfg = load_detector_config(args.config)
-    resume = (args.out / LAST).is_file()
-    train_detector(args.data, args.out, cfg, resume=resume, max_steps=args.max_steps)
+    if not (args.out / LAST).is_file() or args.minutes is None:
+        resume = (args.out / LAST).is_file()
+        train_detector(
+            args.data, args.out, cfg, resume=resume, max_steps=args.max_steps, minutes=args.minutes
+        )
     ckpt = args.out / BEST if (args.out / BEST).is_file() else args.out / LAST
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     images, dets, state = detect_split(ckpt, args.data, "test", cfg.obj_id, device)

@@ -233,19 +233,34 @@ def eval_cmd(
     "--config", "config", default=None, help="cpu (alias smoke) | paper | a YAML/TOML file  [default: cpu]"
 )
 @click.option("--max-steps", type=click.IntRange(min=1), default=None, help="Stop after N steps.")
+@click.option(
+    "--minutes",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Wall-time budget: the schedule is fitted while it runs so that it ends after M minutes "
+    "(set-up included). A new run only: no --resume or --max-steps.",
+)
 @click.option("--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config).")
 @click.option("--obj-id", type=click.IntRange(min=1), default=None, help="Object to detect [default: 1].")
 @one_line_errors(PosenetError, ScgenError)
 def train_detector_cmd(
-    data: Path, out: Path, config: str | None, max_steps: int | None, resume: bool, obj_id: int | None
+    data: Path,
+    out: Path,
+    config: str | None,
+    max_steps: int | None,
+    minutes: float | None,
+    resume: bool,
+    obj_id: int | None,
 ) -> None:
-    """Train the single-class target detector (FCOS on an ImageNet backbone: `pretrained:` imagenet,
-    package, a local file or null) on the visible boxes (bbox_visib)."""
+    """Train the single-class target detector on what is seen of the target: FCOS on the visible boxes
+    (bbox_visib; the cpu and paper presets), or `arch: mask-timm` on the visible masks (mask_visib; the
+    box is the mask's extent). Backbones start from ImageNet (`pretrained:` imagenet, package, a local
+    file or null)."""
     if config is None:
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "cpu"
     cfg = load_detector_config(config, obj_id)
-    last = train_detector(data, out, cfg, resume=resume, max_steps=max_steps)
+    last = train_detector(data, out, cfg, resume=resume, max_steps=max_steps, minutes=minutes)
     best = last.with_name(BEST)
     click.echo(f"checkpoint: {last}")
     if best.is_file():

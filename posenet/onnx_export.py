@@ -23,6 +23,7 @@ import torchvision.ops.boxes as box_ops
 from onnxscript import opset18 as op
 from torch import Tensor, nn
 
+from posenet.detection.segmenter import MaskDetector, mask_box
 from posenet.models import PoseNet
 
 OPSET = 18
@@ -138,20 +139,39 @@ class DetectorBestBox(nn.Module):
         return box[0] * scale, scores.flatten()[best]
 
 
+class MaskProbabilities(nn.Module):
+    """A mask detector reduced to its graph: the target's probability per pixel (1 x H x W) of one RGB
+    image in [0, 1] (1 x 3 x H x W); the box is taken from it outside the graph (segmenter.mask_box)."""
+
+    def __init__(self, detector: MaskDetector) -> None:
+        super().__init__()
+        self.detector = detector
+
+    def forward(self, image: Tensor) -> Tensor:
+        return torch.sigmoid(self.detector.logits(image)[:, 0])
+
+
 def export_detector_onnx(model: nn.Module, path: Path, size: tuple[int, int], score_thresh: float) -> None:
-    """Write the detector's DetectorBestBox as an ONNX graph for images of `size` (width, height): the
-    pose network's training camera, which predict warps every image into. The score threshold travels in
-    the graph's metadata (DETECTOR_SCORE_KEY)."""
+    """Write the detector as an ONNX graph for images of `size` (width, height): the pose network's
+    training camera, which predict warps every image into. FCOS becomes its DetectorBestBox (outputs box,
+    score), a mask detector its MaskProbabilities (output prob). The score threshold travels in the
+    graph's metadata (DETECTOR_SCORE_KEY)."""
     example = torch.rand(1, 3, size[1], size[0])
+    model = model.cpu().eval()
+    graph, outputs = (
+        (MaskProbabilities(model), ["prob"])
+        if isinstance(model, MaskDetector)
+        else (DetectorBestBox(model), ["box", "score"])
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         program = torch.onnx.export(
-            DetectorBestBox(model.cpu().eval()),
+            graph,
             (example,),
             dynamo=True,
             opset_version=OPSET,
             input_names=["image"],
-            output_names=["box", "score"],
+            output_names=outputs,
             verbose=False,
         )
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -169,9 +189,12 @@ def input_shape(session: ort.InferenceSession, name: str) -> list[Any]:
 
 
 def run_detector_onnx(session: ort.InferenceSession, image: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """The best box [x0, y0, x1, y1] and score of a DetectorBestBox graph for one RGB image (H x W x 3
-    float32 in [0, 1]), or None under the graph's score threshold."""
+    """The best box [x0, y0, x1, y1] and score of a detector graph (DetectorBestBox or MaskProbabilities)
+    for one RGB image (H x W x 3 float32 in [0, 1]), or None under the graph's score threshold."""
     feed = np.ascontiguousarray(image.transpose(2, 0, 1))[None]
-    box, score = session.run(None, {"image": feed})
     thresh = float(session.get_modelmeta().custom_metadata_map.get(DETECTOR_SCORE_KEY, "0"))
+    if [o.name for o in session.get_outputs()] == ["prob"]:
+        (prob,) = session.run(None, {"image": feed})
+        return mask_box(prob[0], thresh)
+    box, score = session.run(None, {"image": feed})
     return (np.asarray(box, np.float64), float(score)) if float(score) > thresh else None

@@ -17,6 +17,7 @@ from torch._subclasses.fake_tensor import FakeTensorDeviceMismatchError, FakeTen
 
 from posenet.config import LossConfig
 from posenet.detection.detector import build_detector, cpu_config, detector_config_from_dict
+from posenet.detection.segmenter import mask_losses
 from posenet.geometry import decode_pose
 from posenet.losses import PmObject, pose_losses
 from posenet.metrics import sample_errors
@@ -108,3 +109,16 @@ def test_detector_network_anchors_and_box_decoding_stay_on_cuda(preset: str) -> 
     assert images.tensors.device == CUDA and all(f.device == CUDA for f in features)
     assert anchors[0].device == boxes.device == scores.device == CUDA
     assert boxes.shape == (len(anchors[0]), 4)
+
+
+def test_mask_detector_logits_and_losses_stay_on_cuda() -> None:
+    """The mask detector: its per-pixel logits, at the input's size, and its losses."""
+    cfg = detector_config_from_dict({"preset": "cpu", "arch": "mask-timm"})
+    model = build_detector(cfg.model_dict(), None).train()
+    mode = FakeTensorMode()
+    with mode:
+        to_fake_cuda(model, mode)
+        logits = model.logits(torch.rand(2, 3, 240, 320, device=CUDA))
+        losses = mask_losses(logits, torch.zeros(2, 1, 240, 320, device=CUDA))
+    assert logits.device == CUDA and logits.shape == (2, 1, 240, 320)
+    assert all(v.device == CUDA for v in losses.values())

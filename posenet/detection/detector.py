@@ -1,10 +1,12 @@
-"""The target detector of the paper's protocol: its configuration, the torchvision FCOS network and its data.
+"""The target detector of the paper's protocol: its configuration, its networks and its data.
 
-One class (the target object) is learned from the visible box `bbox_visib`, since the pose network's
-crop should cover what is seen. The backbone starts from ImageNet weights, loaded as the pose network's
-are (`pretrained`, posenet.models.backbone): `cpu` FCOS over the package-shipped EfficientNet-Lite0 with
-an FPN over strides 8-32 (the benchmark's targets are mostly 10-64 px), `paper` torchvision's
-FCOS-ResNet50-FPN on timm's ImageNet ResNet-50. `pretrained: null` trains from random init.
+One class (the target object) is learned from what is seen of it (`bbox_visib`, `mask_visib`), since
+the pose network's crop should cover what is seen. The backbone starts from ImageNet weights, loaded as
+the pose network's are (`pretrained`, posenet.models.backbone). Three networks: `fcos-timm-fpn` (the
+`cpu` preset) FCOS over the package-shipped EfficientNet-Lite0 with an FPN over strides 8-32 (the
+benchmark's targets are mostly 10-64 px); `fcos-resnet50-fpn` (the `paper` preset) torchvision's
+FCOS-ResNet50-FPN on timm's ImageNet ResNet-50; `mask-timm` the visible mask over a timm backbone, its
+box the mask's extent (posenet.detection.segmenter). `pretrained: null` trains from random init.
 """
 
 from __future__ import annotations
@@ -29,12 +31,17 @@ from posenet.config import OptimConfig, override_fields, plain, read_config_file
 from posenet.data.augment import brightness_contrast
 from posenet.data.io import read_bgr, read_mask
 from posenet.data.layout import Instance, scan_split
+from posenet.detection.segmenter import MaskDetector
 from posenet.errors import PosenetError
 from posenet.models.backbone import IMAGENET, PACKAGE, initial_weights, input_mean_std, timm_features
 
 PRESETS = ("cpu", "paper")
 ALIASES = {"smoke": "cpu"}
-ARCHS = ("fcos-timm-fpn", "fcos-resnet50-fpn")
+ARCHS = ("mask-timm", "fcos-timm-fpn", "fcos-resnet50-fpn")
+MASK_ARCHS = ("mask-timm",)  # the networks that learn mask_visib (their targets carry masks)
+# a resampled 0 / 1 mask is the target's where it reaches this: bilinear resampling spreads a lone or
+# diagonal pixel to >= 1/4 about its place but not always to 1/2
+MASK_CUT = 0.25
 POSE_ONLY_OPTIM = ("amp", "grad_centralization")  # OptimConfig fields only pose training reads
 STRIDES = (2, 4, 8, 16, 32)  # the backbone strides fcos-timm-fpn may predict at (min_stride ... 32)
 FCOS_NORM_GROUPS = 32  # the GroupNorm groups of torchvision's FCOSHead: fpn_channels must divide by them
@@ -46,13 +53,13 @@ class DetectorConfig:
 
     preset: str = "paper"
     arch: str = "fcos-resnet50-fpn"
-    backbone: str = "tf_efficientnet_lite0"  # fcos-timm-fpn: the timm model
-    fpn_channels: int = 64  # fcos-timm-fpn: channels of the FPN levels and the FCOS head
+    backbone: str = "tf_efficientnet_lite0"  # mask-timm, fcos-timm-fpn: the timm model
+    fpn_channels: int = 64  # mask-timm: the decoder's channels; fcos-timm-fpn: the FPN's and FCOS head's
     min_stride: int = 8  # fcos-timm-fpn: FCOS predicts at the backbone strides min_stride ... 32
     head_convs: int = 4  # fcos-timm-fpn: conv layers of each FCOS head branch
     # where the backbone's weights come from: imagenet | package | a local file | None (random init)
     pretrained: str | None = IMAGENET
-    min_size: int = 800  # images are resized so the short side is min_size (long side <= max_size)
+    min_size: int = 800  # FCOS resizes images so the short side is min_size (long side <= max_size)
     max_size: int = 1333
     score_thresh: float = 0.05  # detections below are dropped; an image left without any is a miss
     obj_id: int = 1
@@ -129,7 +136,7 @@ def detector_config_from_dict(raw: dict[str, Any]) -> DetectorConfig:
     for name, value in sizes.items():
         if value < 1:
             raise PosenetError(f"detector {name} must be >= 1, got {value}")
-    if cfg.fpn_channels % FCOS_NORM_GROUPS:  # torchvision's FCOS head normalises in groups of 32
+    if cfg.arch == "fcos-timm-fpn" and cfg.fpn_channels % FCOS_NORM_GROUPS:  # FCOS's GroupNorm: 32 groups
         raise PosenetError(
             f"detector fpn_channels must be a multiple of {FCOS_NORM_GROUPS}, got {cfg.fpn_channels}"
         )
@@ -158,10 +165,14 @@ class TimmFpn(nn.Module):
         return self.fpn(OrderedDict((str(i), maps[i]) for i in self.levels))
 
 
-def build_detector(model_config: dict[str, Any], pretrained: str | None = None) -> FCOS:
-    """The FCOS network of a `DetectorConfig.model_dict()` (classes: background, target), its backbone
+def build_detector(model_config: dict[str, Any], pretrained: str | None = None) -> FCOS | MaskDetector:
+    """The network of a `DetectorConfig.model_dict()` (FCOS: classes background and target), its backbone
     initialised from `pretrained` (posenet.models.backbone) or random init. Images are normalised as the
     backbone's ImageNet weights expect (timm's pretrained_cfg mean / std)."""
+    if model_config["arch"] in MASK_ARCHS:
+        return MaskDetector(
+            model_config["backbone"], model_config["fpn_channels"], model_config["score_thresh"], pretrained
+        )
     kw = {k: model_config[k] for k in ("min_size", "max_size", "score_thresh")} | {"detections_per_img": 10}
     if model_config["arch"] == "fcos-resnet50-fpn":
         model = fcos_resnet50_fpn(weights=None, weights_backbone=None, num_classes=2, **kw)
@@ -202,8 +213,9 @@ def visible_boxes(instances: list[Instance]) -> np.ndarray:
 def random_zoom(
     img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator, scale: tuple[float, float]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The image scaled by s ~ U(scale) on a canvas of its own size (black outside), shifted at random but
-    keeping the targets' union box inside where it fits; the boxes moved alike."""
+    """The image (any channels: a mask may ride along) scaled by s ~ U(scale) on a canvas of its own size
+    (black outside), shifted at random but keeping the targets' union box inside where it fits; the boxes
+    moved alike."""
     h, w = img.shape[:2]
     s = rng.uniform(*scale)
     if len(boxes):
@@ -214,6 +226,7 @@ def random_zoom(
     tx = rng.uniform(-x0, w - x1) if w - x1 >= -x0 else (w - x0 - x1) / 2
     ty = rng.uniform(-y0, h - y1) if h - y1 >= -y0 else (h - y0 - y1) / 2
     out = cv2.warpAffine(img, np.float32([[s, 0, tx], [0, s, ty]]), (w, h), flags=cv2.INTER_LINEAR)
+    out = out.reshape(img.shape)  # cv2 drops a single channel's axis
     moved = boxes * s + np.float32([tx, ty, tx, ty])
     moved[:, 0::2] = moved[:, 0::2].clip(0, w)
     moved[:, 1::2] = moved[:, 1::2].clip(0, h)
@@ -234,14 +247,17 @@ def paste_target(
     tries: int = 10,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Copy-paste: the visible pixels (mask_visib) of the donor's first visible instance, scaled by
-    s ~ U(scale), pasted at a random place clear of `boxes`; its box appended. Unchanged when the donor
-    shows nothing or no clear place is found in `tries`."""
+    s ~ U(scale), pasted at a random place clear of `boxes`; its box appended (and, when `img` carries a
+    mask as a 4th channel, its mask). Unchanged when the donor shows nothing or no clear place is found
+    in `tries`."""
     shown = [i for i in donor if i.px_count_visib > 0]
     if not shown:
         return img, boxes
     x0, y0, x1, y1 = (int(v) for v in visible_boxes(shown[:1])[0])
     mask = read_mask(shown[0].mask_visib)[y0:y1, x0:x1] > 0
     patch, s = _read_rgb(shown[0].rgb)[y0:y1, x0:x1], rng.uniform(*scale)
+    if img.shape[2] == 4:
+        patch = np.dstack([patch, mask.astype(np.float32)])  # its blend is replaced below
     h, w = img.shape[:2]
     size = (max(1, round(patch.shape[1] * s)), max(1, round(patch.shape[0] * s)))
     if size[0] >= w or size[1] >= h:
@@ -261,21 +277,27 @@ def paste_target(
             out = img.copy()
             region = out[py : py + size[1], px : px + size[0]]
             region[:] = alpha * patch + (1 - alpha) * region
+            if img.shape[2] == 4:  # the mask stays 0 / 1: one interpolation (the zoom's) before the cut
+                region[..., 3] = np.maximum(
+                    img[py : py + size[1], px : px + size[0], 3], alpha[..., 0] >= MASK_CUT
+                )
             return out, np.concatenate([boxes, new[None]])
     return img, boxes
 
 
 def hflip(img: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The image mirrored left-right and its [x0, y0, x1, y1] pixel-edge boxes alike."""
+    """The image (any channels) mirrored left-right and its [x0, y0, x1, y1] pixel-edge boxes alike."""
     w = img.shape[1]
     return img[:, ::-1], np.stack([w - boxes[:, 2], boxes[:, 1], w - boxes[:, 0], boxes[:, 3]], 1)
 
 
 class DetectionDataset(Dataset):
-    """One item per image: (3, H, W) float RGB in [0, 1] and its FCOS target {boxes, labels} (bbox_visib).
+    """One item per image: (3, H, W) float RGB in [0, 1] and its target {boxes, labels} (bbox_visib), plus
+    `masks` ((1, H, W) float 0/1, the union of the instances' mask_visib) for a mask network.
 
     With `train`, each image is augmented (copy-paste, zoom, mirror, brightness/contrast) from a generator
-    seeded by (seed, epoch, index): the same run sees the same images, whatever the loader processes.
+    seeded by (seed, epoch, index): the same run sees the same images, whatever the loader processes. The
+    mask travels through the geometric augmentations as a 4th channel of the image.
     """
 
     def __init__(self, images: list[list[Instance]], cfg: DetectorConfig, train: bool, seed: int = 0) -> None:
@@ -288,6 +310,11 @@ class DetectionDataset(Dataset):
         insts = self.images[index]
         img = _read_rgb(insts[0].rgb)
         boxes = visible_boxes(insts)
+        with_mask = self.cfg.arch in MASK_ARCHS
+        if with_mask:
+            shown = [read_mask(i.mask_visib) > 0 for i in insts if i.px_count_visib > 0]
+            union = np.logical_or.reduce(shown) if shown else np.zeros(img.shape[:2], bool)
+            img = np.dstack([img, union.astype(np.float32)])
         if self.train:
             rng = np.random.default_rng([self.seed, self.epoch, index])
             c = self.cfg
@@ -299,9 +326,11 @@ class DetectionDataset(Dataset):
             if rng.random() < c.flip_prob:
                 img, boxes = hflip(img, boxes)
             if rng.random() < c.color_prob:
-                img = brightness_contrast(img, rng, c.brightness, c.contrast)
+                img[..., :3] = brightness_contrast(img[..., :3], rng, c.brightness, c.contrast)
         target = {"boxes": torch.from_numpy(boxes), "labels": torch.ones(len(boxes), dtype=torch.int64)}
-        return torch.from_numpy(np.ascontiguousarray(img.transpose(2, 0, 1))), target
+        if with_mask:
+            target["masks"] = torch.from_numpy((img[None, ..., 3] >= MASK_CUT).astype(np.float32))
+        return torch.from_numpy(np.ascontiguousarray(img[..., :3].transpose(2, 0, 1))), target
 
 
 def collate(batch: list[tuple[torch.Tensor, dict]]) -> tuple[list[torch.Tensor], list[dict]]:

@@ -2,7 +2,8 @@
 
 OUT holds config.yaml, train_log.jsonl, tb/, last.pt (rewritten every ckpt_every epochs and at the stop)
 and best.pt: the checkpoint with the highest val mean IoU so far (misses count 0), scored whenever
-last.pt is written. Without a val split (or no image in it), best.pt is not written.
+last.pt is written. Without a val split (or no image in it), best.pt is not written. With `minutes`, the
+schedule is fitted while it runs to end after that much wall time, as pose training's (posenet.budget).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import yaml
 from torch.utils.data import DataLoader
 from torchvision.models.detection import FCOS
 
+from posenet.budget import TimeBudget
 from posenet.checkpoint import load_checkpoint, save_checkpoint
 from posenet.detection.detect import box_metrics, detect
 from posenet.detection.detector import (
@@ -46,21 +48,31 @@ BEST = "best.pt"
 
 
 def train_detector(
-    data: Path, out: Path, cfg: DetectorConfig, resume: bool = False, max_steps: int | None = None
+    data: Path,
+    out: Path,
+    cfg: DetectorConfig,
+    resume: bool = False,
+    max_steps: int | None = None,
+    minutes: float | None = None,
 ) -> Path:
     """Train on `data`'s train split into `out` on the current device; returns the path of last.pt. A run
     that fails before its first checkpoint (an image that cannot be read) leaves no folder behind."""
+    if minutes is not None and (resume or max_steps is not None):
+        raise PosenetError("--minutes fits a new run's whole schedule: it takes no --resume or --max-steps")
     check_run_folder(out, resume)
     made = first_missing(out)
+    budget = TimeBudget(60 * minutes, cfg.optim.anneal_point) if minutes is not None else None
     try:
-        return _train(data, out, cfg, resume, max_steps)
+        return _train(data, out, cfg, resume, max_steps, budget)
     except (PosenetError, ScgenError):
         if made is not None and not (out / LAST).exists():
             shutil.rmtree(made, ignore_errors=True)
         raise
 
 
-def _train(data: Path, out: Path, cfg: DetectorConfig, resume: bool, max_steps: int | None) -> Path:
+def _train(
+    data: Path, out: Path, cfg: DetectorConfig, resume: bool, max_steps: int | None, budget: TimeBudget | None
+) -> Path:
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     o = cfg.optim
     train_set = DetectionDataset(image_groups(data, "train", cfg.obj_id), cfg, train=True, seed=o.seed)
@@ -69,13 +81,13 @@ def _train(data: Path, out: Path, cfg: DetectorConfig, resume: bool, max_steps: 
         raise PosenetError(f"{len(train_set)} training images are fewer than one batch of {o.batch_size}")
     val = _val_images(data, cfg.obj_id)
     total = o.epochs * per_epoch
-    stop = stop_step(total, max_steps, o.epochs, per_epoch, announce=True)
+    stop = budget.total if budget else stop_step(total, max_steps, o.epochs, per_epoch, announce=True)
     if device.type == "cpu":
         pin_cpu_threads(o.threads)
     torch.manual_seed(o.seed)
     # channels-last weights make every convolution's output channels-last on a CPU (FCOS batches the images)
     model = build_detector(cfg.model_dict(), cfg.pretrained).to(device, memory_format=memory_format(device))
-    optimizer, scheduler = make_optimizer(model, o, total)
+    optimizer, scheduler = make_optimizer(model, o, (lambda: budget.total) if budget else total)
     step, best = 0, -math.inf
     if resume:
         state = load_checkpoint(out / LAST, kind="detector")
@@ -87,11 +99,14 @@ def _train(data: Path, out: Path, cfg: DetectorConfig, resume: bool, max_steps: 
         step, best = int(state["step"]), float(state["best_val_iou"])
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
-    log = RunLog(out, step, stop, o.log_every)
+    log = RunLog(out, step, None if budget else stop, o.log_every)
     try:
         while step < stop:
             epoch, skip = divmod(step, per_epoch)
-            step = _epoch(model, optimizer, scheduler, train_set, epoch, skip, step, stop, cfg, device, log)
+            steps = (step, stop)
+            step, stop = _epoch(
+                model, optimizer, scheduler, train_set, epoch, skip, steps, cfg, device, log, budget
+            )
             if step >= stop or (epoch + 1) % o.ckpt_every == 0:
                 best = _save(out, model, optimizer, scheduler, cfg, step, best, val, device, log)
     finally:
@@ -114,15 +129,17 @@ def _epoch(
     dataset: DetectionDataset,
     epoch: int,
     skip: int,
-    step: int,
-    stop: int,
+    steps: tuple[int, int],
     cfg: DetectorConfig,
     device: torch.device,
     log: RunLog,
-) -> int:
+    budget: TimeBudget | None,
+) -> tuple[int, int]:
     """The epoch's shuffled batches (a fixed permutation per (seed, epoch)) from batch `skip` up to the stop
-    step, one optimisation step each; returns the step reached."""
+    step, one optimisation step each; returns the step reached and the stop step (a time budget moves it
+    after every step)."""
     o = cfg.optim
+    step, stop = steps
     dataset.epoch = epoch
     order = torch.randperm(len(dataset), generator=torch.Generator().manual_seed(o.seed * 100003 + epoch))
     batches = order[: len(order) // o.batch_size * o.batch_size].view(-1, o.batch_size)[skip:]
@@ -143,9 +160,20 @@ def _epoch(
         loss = sum(terms.values())
         log.step({"step": step, "epoch": epoch, "lr": lr, "step_s": toc - tic, "loss": loss, **terms})
         tic = toc
+        if budget is not None:
+            stop = _follow_budget(budget, step, toc, log)
         if step >= stop:
             break
-    return step
+    return step, stop
+
+
+def _follow_budget(budget: TimeBudget, step: int, now: float, log: RunLog) -> int:
+    """Refit the schedule to the time budget after `step`; returns the step to stop at."""
+    if budget.update(step, now):
+        log.bar.write(f"time budget {budget.seconds / 60:g} min: schedule fitted to {budget.total} steps")
+    if budget.fitted:
+        log.bar.total = budget.total
+    return step if budget.expired(now) and step < budget.total else budget.total
 
 
 def detector_step(
