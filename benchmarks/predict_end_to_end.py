@@ -2,7 +2,7 @@
 against the labels they came with, beside posenet eval at ground-truth boxes on the same images.
 
     python benchmarks/predict_end_to_end.py --pose RUN/last.pt --detector DET/best.pt \\
-        --data HELD_OUT_CORRIDOR --data HELD_OUT_DEFAULT --out /tmp/e2e
+        --data HELD_OUT_CORRIDOR --data HELD_OUT_DEFAULT --out /tmp/e2e [--split test] [--scale 2]
 
 For each --data (a scgen render the checkpoints were not trained on), the images of its split that show
 the object are copied, renamed, into OUT/NAME/input with the dataset's camera.json and nothing else; then
@@ -10,6 +10,9 @@ the object are copied, renamed, into OUT/NAME/input with the dataset's camera.js
 networks) in onnxruntime. Each written prediction is scored against its label: rotation median, ADD@0.1d
 (posenet.metrics), and the detector's IoU against bbox_visib; beside it, `posenet eval` at the ground-truth
 boxes. predict's own images per second (the batch, model loading excluded) are read from its output.
+With --scale S the user's copies are the images resized S times (bicubic) with camera.json's
+intrinsics scaled alike (posenet.predict.camera.resized): a user camera of S times the size, which
+predict warps back into the training camera; the labels and the poses do not change.
 Writes OUT/report.json and prints one table. The goal of issue 50: ADD@0.1d at detected boxes within 3
 points of that at ground-truth boxes, and >= 30 images/s at 640x480 through ONNX on 2 cores.
 """
@@ -25,6 +28,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import torch
 
@@ -34,23 +38,34 @@ from posenet.data.layout import Instance, scan_split
 from posenet.detection.detect import iou
 from posenet.evaluate import evaluate
 from posenet.metrics import sample_errors, summarise
+from posenet.predict.camera import read_camera_file, resized
 from posenet.predict.predictor import Predictor
 from scgen.io import bop
 
 POSENET = [sys.executable, "-m", "posenet.cli"]
 
 
-def user_folder(data: Path, split: str, obj_id: int, folder: Path) -> dict[str, Instance]:
-    """The split's images showing the object, copied as a user would hold them, with camera.json; the
-    instance behind each file name."""
+def user_folder(data: Path, split: str, obj_id: int, folder: Path, scale: float) -> dict[str, Instance]:
+    """The split's images showing the object, copied as a user would hold them (resized `scale` times),
+    with camera.json; the instance behind each file name."""
     folder.mkdir(parents=True, exist_ok=True)
-    shutil.copy(data / bop.CAMERA_FILE, folder / "camera.json")
+    camera = read_camera_file(data / bop.CAMERA_FILE)
+    assert camera.size is not None
+    size = (round(camera.size[0] * scale), round(camera.size[1] * scale))
+    K = resized(camera, size).K
+    spec = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2], "width": size[0], "height": size[1]}
+    (folder / "camera.json").write_text(json.dumps(spec, indent=1) + "\n")
     names = {}
     for inst in scan_split(data, split, obj_id):
         if inst.px_count_visib <= 0:
             continue
         name = f"img_{inst.scene_id:06d}_{inst.im_id:06d}{inst.rgb.suffix}"
-        shutil.copy(inst.rgb, folder / name)
+        if scale == 1:
+            shutil.copy(inst.rgb, folder / name)
+        else:
+            cv2.imwrite(
+                str(folder / name), cv2.resize(cv2.imread(str(inst.rgb)), size, interpolation=cv2.INTER_CUBIC)
+            )
         names[name] = inst
     return names
 
@@ -64,8 +79,11 @@ def run_predict(args: list[Any]) -> tuple[Path, float]:
     return Path(args[args.index("--out") + 1]), rate
 
 
-def score(predictions: Path, names: dict[str, Instance], predictor: Predictor) -> dict[str, Any]:
-    """Pose figures (posenet.metrics.summarise) and box figures of a predictions.jsonl against its labels."""
+def score(
+    predictions: Path, names: dict[str, Instance], predictor: Predictor, scale: float
+) -> dict[str, Any]:
+    """Pose figures (posenet.metrics.summarise) and box figures of a predictions.jsonl against its labels
+    (boxes in the user's image, `scale` times the labelled one, are scaled back)."""
     obj = predictor.obj
     geometry = [torch.from_numpy(a) for a in (obj.pm_points, obj.vertices, obj.symmetries)]
     errors: dict[str, list[float]] = {}
@@ -80,7 +98,7 @@ def score(predictions: Path, names: dict[str, Instance], predictor: Predictor) -
             e = {k: float("inf") for k in ("re_deg", "re_sym_deg", "te_m", "tz_rel", "add_m", "add_rot_m",
                                             "adds_m", "mssd_m", "esa")}  # fmt: skip
         else:
-            bx, by, bw, bh = r["box"]
+            bx, by, bw, bh = ((v + 0.5) / scale - 0.5 if i < 2 else v / scale for i, v in enumerate(r["box"]))
             ious.append(iou((bx - 0.5, by - 0.5, bx + bw - 0.5, by + bh - 0.5), gt_box))
             R, t = torch.tensor(r["R"]).reshape(1, 3, 3), torch.tensor(r["t"])[None]
             gt_R, gt_t = torch.from_numpy(inst.R)[None], torch.from_numpy(inst.t)[None]
@@ -95,7 +113,7 @@ def score(predictions: Path, names: dict[str, Instance], predictor: Predictor) -
 
 def one_dataset(data: Path, out: Path, args: argparse.Namespace, onnx: tuple[Path, Path]) -> dict[str, Any]:
     obj_id = config_from_dict(load_checkpoint(args.pose)["config"]).data.obj_id
-    names = user_folder(data, args.split, obj_id, out / "input")
+    names = user_folder(data, args.split, obj_id, out / "input", args.scale)
     predictor = Predictor.load(args.pose)
     common = [
         out / "input",
@@ -114,8 +132,9 @@ def one_dataset(data: Path, out: Path, args: argparse.Namespace, onnx: tuple[Pat
     return {
         "data": str(data),
         "images": len(names),
-        "detected": score(torch_out / "predictions.jsonl", names, predictor),
-        "detected_onnx": score(onnx_out / "predictions.jsonl", names, predictor),
+        "scale": args.scale,
+        "detected": score(torch_out / "predictions.jsonl", names, predictor, args.scale),
+        "detected_onnx": score(onnx_out / "predictions.jsonl", names, predictor, args.scale),
         "ground_truth_boxes": gt,
         "images_per_s": {"torch": torch_rate, "onnx": onnx_rate},
     }
@@ -124,7 +143,9 @@ def one_dataset(data: Path, out: Path, args: argparse.Namespace, onnx: tuple[Pat
 def table(report: dict[str, Any]) -> str:
     head = "| set | images | boxes | rotation median | ADD@0.1d | mean IoU | IoU >= 0.5 | misses | images/s |"
     rows = [head, "|---|---|---|---|---|---|---|---|---|"]
-    for name, r in report.items():
+    for set_name, r in report.items():
+        width = json.loads((Path(r["data"]) / bop.CAMERA_FILE).read_text())["width"]
+        name = f"{set_name}, {round(width * r['scale'])} px wide"
         for label, key, rate in (
             ("detector, torch", "detected", "torch"),
             ("detector, ONNX", "detected_onnx", "onnx"),
@@ -148,6 +169,7 @@ def main() -> None:
     )
     ap.add_argument("--split", default="test", help="Split of each --data [test].")
     ap.add_argument("--out", type=Path, required=True, help="Working and report folder.")
+    ap.add_argument("--scale", type=float, default=1.0, help="Resize the user's images S times [1].")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     onnx = (args.out / "onnx" / "pose.onnx", args.out / "onnx" / "detector.onnx")
