@@ -259,11 +259,11 @@ def test_the_mask_detector_trains_and_runs_in_onnxruntime(dataset_dir: Path, tmp
 
 
 def test_minutes_fit_the_detector_schedule_to_the_budget(dataset_dir: Path, tmp_path: Path) -> None:
-    """train-detector --minutes: the schedule is fitted while it runs, its decay ends at the budget, and a
-    resumed run cannot take a budget (one line)."""
+    """train-detector --minutes: the schedule is fitted while it runs, its decay ends at the budget; a
+    resumed run keeps that schedule (not its config's epochs) and cannot take a budget (one line)."""
     (tmp_path / "tiny.yaml").write_text(
         "preset: cpu\npretrained: null\nfpn_channels: 32\nhead_convs: 1\nmin_size: 120\nmax_size: 160\n"
-        "optim: {threads: 1, warmup_iters: 2}\n"  # small and quick: many steps in the budget
+        "optim: {threads: 1, warmup_iters: 2, epochs: 500}\n"  # small and quick: many steps in the budget
     )
     run = tmp_path / "run"
     tic = time.perf_counter()
@@ -277,6 +277,10 @@ def test_minutes_fit_the_detector_schedule_to_the_budget(dataset_dir: Path, tmp_
     assert 0.9 * total <= rows[-1]["step"] <= total
     assert rows[-1]["lr"] < 0.1 * max(r["lr"] for r in rows)
     assert 0.8 * 24.0 < wall < 24.0 + 15.0  # the budget, then the last checkpoint and its val scoring
+    assert torch.load(run / "last.pt", weights_only=False)["schedule_steps"] == total
+    _invoke("train-detector", "--data", dataset_dir, "--out", run, "--resume", "--max-steps", total + 2)
+    last = json.loads((run / "train_log.jsonl").read_text().splitlines()[-1])
+    assert last["step"] == total  # the fitted schedule's end, not past it toward the config's 500 epochs
     res = CliRunner().invoke(main, ["train-detector", "--data", str(dataset_dir), "--out", str(run),
                                     "--resume", "--minutes", "1"])  # fmt: skip
     assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1

@@ -81,6 +81,9 @@ def _train(
         raise PosenetError(f"{len(train_set)} training images are fewer than one batch of {o.batch_size}")
     val = _val_images(data, cfg.obj_id)
     total = o.epochs * per_epoch
+    state = load_checkpoint(out / LAST, kind="detector") if resume else None
+    if state is not None:  # a resumed run keeps the schedule it started with (a time budget's fitted one)
+        total = int(state.get("schedule_steps") or total)
     stop = budget.total if budget else stop_step(total, max_steps, o.epochs, per_epoch, announce=True)
     if device.type == "cpu":
         pin_cpu_threads(o.threads)
@@ -89,8 +92,7 @@ def _train(
     model = build_detector(cfg.model_dict(), cfg.pretrained).to(device, memory_format=memory_format(device))
     optimizer, scheduler = make_optimizer(model, o, (lambda: budget.total) if budget else total)
     step, best = 0, -math.inf
-    if resume:
-        state = load_checkpoint(out / LAST, kind="detector")
+    if state is not None:
         if state["model_config"] != cfg.model_dict():
             raise PosenetError(f"{out / LAST} is from another detector configuration")
         model.load_state_dict(state["model"])
@@ -108,7 +110,8 @@ def _train(
                 model, optimizer, scheduler, train_set, epoch, skip, steps, cfg, device, log, budget
             )
             if step >= stop or (epoch + 1) % o.ckpt_every == 0:
-                best = _save(out, model, optimizer, scheduler, cfg, step, best, val, device, log)
+                schedule = budget.total if budget else total
+                best = _save(out, model, optimizer, scheduler, cfg, (step, schedule), best, val, device, log)
     finally:
         log.close()
     return out / LAST
@@ -197,13 +200,15 @@ def _save(
     optimizer: torch.optim.Optimizer,
     scheduler: torch.optim.lr_scheduler.LambdaLR,
     cfg: DetectorConfig,
-    step: int,
+    steps: tuple[int, int],
     best: float,
     val: list | None,
     device: torch.device,
     log: RunLog,
 ) -> float:
-    """Write last.pt, and best.pt when the val mean IoU beats `best`; returns the best so far."""
+    """Write last.pt at (step, the schedule's total steps), and best.pt when the val mean IoU beats
+    `best`; returns the best so far."""
+    step, schedule = steps
     metrics: dict[str, Any] = {}
     if val is not None:
         dets = detect(model, DetectionDataset(val, cfg, train=False), device)
@@ -218,6 +223,7 @@ def _save(
         "optimizer": optimizer.state_dict(),
         "scheduler": scheduler.state_dict(),
         "step": step,
+        "schedule_steps": schedule,
         "model_config": cfg.model_dict(),
         "config": cfg.to_dict(),
         "val": metrics,
