@@ -46,6 +46,15 @@ from scgen.io import ScgenError, check_output, make_output_folder, write_output
 
 PATH = click.Path(path_type=Path)
 
+# posenet train's and train-detector's: both fit their schedule with posenet.budget
+minutes_option = click.option(
+    "--minutes",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Wall-time budget: the schedule is fitted while it runs so that its cosine ends after M minutes "
+    "(set-up included); the fitted steps are printed. A new run only: no --resume or --max-steps.",
+)
+
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="scgen", prog_name="posenet")  # one distribution holds both packages
@@ -70,13 +79,7 @@ def main() -> None:
 @click.option(
     "--max-steps", type=click.IntRange(min=1), default=None, help="Stop after N steps (schedule unchanged)."
 )
-@click.option(
-    "--minutes",
-    type=click.FloatRange(min=0, min_open=True),
-    default=None,
-    help="Wall-time budget: the schedule is fitted while it runs so that its cosine ends after M minutes "
-    "(set-up included); the fitted steps are printed. A new run only: no --resume or --max-steps.",
-)
+@minutes_option
 @click.option(
     "--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config is given)."
 )
@@ -233,13 +236,7 @@ def eval_cmd(
     "--config", "config", default=None, help="cpu (alias smoke) | paper | a YAML/TOML file  [default: cpu]"
 )
 @click.option("--max-steps", type=click.IntRange(min=1), default=None, help="Stop after N steps.")
-@click.option(
-    "--minutes",
-    type=click.FloatRange(min=0, min_open=True),
-    default=None,
-    help="Wall-time budget: the schedule is fitted while it runs so that it ends after M minutes "
-    "(set-up included). A new run only: no --resume or --max-steps.",
-)
+@minutes_option
 @click.option("--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config).")
 @click.option("--obj-id", type=click.IntRange(min=1), default=None, help="Object to detect [default: 1].")
 @one_line_errors(PosenetError, ScgenError)
