@@ -16,6 +16,8 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+from posenet.errors import PosenetError
+
 SKIP_STEPS = 5  # steps not timed: the first batches wait for the loader processes and warm-up kernels
 PROBE_STEPS = 15  # steps before the first fit, or fewer once PROBE_SHARE of the budget is spent
 PROBE_SHARE = 0.1
@@ -55,3 +57,15 @@ class TimeBudget:
 
     def expired(self, now: float) -> bool:
         return now >= self.deadline
+
+
+def run_budget(
+    minutes: float | None, anneal_point: float, resume: bool, max_steps: int | None
+) -> TimeBudget | None:
+    """The time budget of a new run given `--minutes` (None without one), started now; a budget fits a
+    whole schedule, so it refuses a resumed run and a step cap."""
+    if minutes is None:
+        return None
+    if resume or max_steps is not None:
+        raise PosenetError("--minutes fits a new run's whole schedule: it takes no --resume or --max-steps")
+    return TimeBudget(60 * minutes, anneal_point)

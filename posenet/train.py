@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 import posenet
 from posenet.amp import Precision
-from posenet.budget import PROBE_STEPS, TimeBudget
+from posenet.budget import PROBE_STEPS, TimeBudget, run_budget
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
 from posenet.config import OptimConfig, TrainConfig, config_from_dict
 from posenet.data import EpochSampler, PoseDataset, open_split
@@ -235,9 +235,7 @@ def train(
 ) -> Path:
     """Train on `data`'s train split into `out`; returns the path of the last checkpoint. With `minutes`,
     the schedule is fitted to end when that much wall time has passed since this call (posenet.budget)."""
-    if minutes is not None and (resume or max_steps is not None):
-        raise PosenetError("--minutes fits a new run's whole schedule: it takes no --resume or --max-steps")
-    budget = TimeBudget(60 * minutes, cfg.optim.anneal_point) if minutes is not None else None
+    budget = run_budget(minutes, cfg.optim.anneal_point, resume, max_steps)
     rank, world, device = _init_distributed()
     made = first_missing(out)  # removed if the run fails before its first checkpoint
     try:

@@ -19,7 +19,7 @@ import yaml
 from torch.utils.data import DataLoader
 from torchvision.models.detection import FCOS
 
-from posenet.budget import TimeBudget
+from posenet.budget import TimeBudget, run_budget
 from posenet.checkpoint import load_checkpoint, save_checkpoint
 from posenet.detection.detect import box_metrics, detect
 from posenet.detection.detector import (
@@ -57,11 +57,9 @@ def train_detector(
 ) -> Path:
     """Train on `data`'s train split into `out` on the current device; returns the path of last.pt. A run
     that fails before its first checkpoint (an image that cannot be read) leaves no folder behind."""
-    if minutes is not None and (resume or max_steps is not None):
-        raise PosenetError("--minutes fits a new run's whole schedule: it takes no --resume or --max-steps")
+    budget = run_budget(minutes, cfg.optim.anneal_point, resume, max_steps)
     check_run_folder(out, resume)
     made = first_missing(out)
-    budget = TimeBudget(60 * minutes, cfg.optim.anneal_point) if minutes is not None else None
     try:
         return _train(data, out, cfg, resume, max_steps, budget)
     except (PosenetError, ScgenError):
