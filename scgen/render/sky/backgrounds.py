@@ -79,16 +79,26 @@ def _moon(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np
     Lambertian under the sun with the map's albedo and the craters' and relief's slopes; the terminator
     is the sphere's own, so slopes tilt light within the day side only. Airless: no haze, no glow.
     """
-    hit, n, _, _ = unit_sphere_hits(rays, body_centre(spec.background.params))
+    centre = body_centre(spec.background.params)
+    hit, n, _, _ = unit_sphere_hits(rays, centre)
     turn = random_rotation(rng)  # camera -> selenographic: each sample sees another part of the Moon
     east = np.cross(turn[2], n)  # turn[2]: the Moon's north pole in the camera frame
     east /= np.maximum(np.linalg.norm(east, axis=1, keepdims=True), 1e-9)
-    albedo, shading = moon_surface(n @ turn.T, n, east, np.cross(n, east))
+    footprint = _footprint(spec, n, rays[hit], centre)
+    albedo, shading = moon_surface(n @ turn.T, n, east, np.cross(n, east), footprint)
     sun = np.asarray(spec.sun.direction)
     lit = np.clip(shading @ sun, 0, 1) * (n @ sun > 0)
     img = stars.copy()
     img[hit] = spec.sun.irradiance * exposure_scale(spec) * (albedo * lit)[:, None] * MOON_TINT
     return img.astype(np.float32)
+
+
+def _footprint(spec: SceneSpec, n: np.ndarray, rays: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Arc of the unit sphere at `centre` (body radii, radians) a pixel spans where its rays hit at normals
+    n: the distance over the focal length, stretched by the obliquity's square root (the geometric mean of
+    the footprint's two sides)."""
+    mu_v = np.maximum(-np.sum(n * rays, axis=1), 1e-3)
+    return np.linalg.norm(n + centre, axis=1) / spec.camera.focal / np.sqrt(mu_v)
 
 
 def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np.ndarray) -> np.ndarray:
@@ -108,8 +118,7 @@ def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: n
     mu_v = -np.sum(n * rays[hit], axis=1)  # cosine of the viewing angle (1 at disc centre, 0 at limb)
     if params.get("earth_map") == "bluemarble":
         q = n @ earth_frame(params).T  # Earth-fixed coordinates: z the north pole, x Greenwich
-        distance = np.linalg.norm(n + centre, axis=1)  # camera to surface, in Earth radii
-        footprint = distance / spec.camera.focal / np.sqrt(np.maximum(mu_v, 1e-3))  # arc per pixel
+        footprint = _footprint(spec, n, rays[hit], centre)
         surface, water, cloud = bluemarble_surface(q, level_of_detail(footprint), spec.background.seed)
     else:
         q = n @ random_rotation(rng).T  # continents do not follow the camera

@@ -5,6 +5,11 @@ q it gives the normal albedo and the surface slope that craters and relief add. 
 Moon's: highlands about 0.14, maria about 0.07 over about a sixth of the surface, so the disc averages
 about 0.12, the Moon's geometric albedo. backgrounds.py shades it under the sun; airless, it has no
 haze, no glow above its limb, and its night side is black.
+
+The maps hold the large craters (radii 12-360 km) at 5.5 km a texel. Below that, craters come from a
+procedural field evaluated at each pixel (fine_craters): octaves of craters down to 40 m, each octave
+drawn only where the pixel footprint resolves it, so that the Moon seen from 100 km up is as cratered as
+its disc from afar, and no crater smaller than a pixel aliases.
 """
 
 from __future__ import annotations
@@ -21,8 +26,16 @@ HIGHLAND_ALBEDO, MARE_ALBEDO = 0.14, 0.07
 MARE_SHARE = 0.16  # of the surface
 CRATERS = 6000  # craters stamped into the height map, radii 0.4-12 deg with N(>r) ~ 1/r^2
 CRATER_RADIUS_DEG = (0.4, 12.0)
-RELIEF = 0.015  # rolling relief between craters: height deviation in Moon radii
+RELIEF = 0.003  # rolling relief between craters: height deviation in Moon radii (5 km; LOLA's is ~2-3 km)
 MAX_SLOPE = 0.8  # tan of the steepest slope shaded (39 deg; the map's poles would give more)
+# The fine crater field: octave k has 3D cells of FINE_CELL / 2^k Moon radii; each cell holds CANDIDATES
+# crater centres, jittered in it and kept where they lie within SHELL cells of the surface, so that with
+# reach (REACH radii) <= (0.5 - SHELL) cells the 2 x 2 x 2 cells nearest a point hold every crater that
+# touches it. Radii 0.08-0.22 cells: the first octave continues the map's smallest craters (12 km).
+FINE_CELL, FINE_OCTAVES, CANDIDATES, SHELL = 0.05, 9, 2, 0.15
+FINE_RADIUS = (0.08, 0.22)  # of the cell
+REACH = 1.6  # crater radii: the raised rim's extent
+RESOLVED_PX = (4.0, 12.0)  # an octave fades in between these cell sizes in pixels (radii of ~0.6-1.8 px)
 
 
 @functools.lru_cache(maxsize=1)
@@ -79,10 +92,97 @@ def _stamp_craters(rng: np.random.Generator, height: np.ndarray, albedo: np.ndar
             albedo[np.ix_(rows, cols)] *= 1.0 + 0.5 * np.exp(-((x / 1.3) ** 4))
 
 
-def moon_surface(q: np.ndarray, n: np.ndarray, east: np.ndarray, north: np.ndarray) -> tuple[np.ndarray, ...]:
+def crater_profile_slope(x: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """d height / d distance of a crater at x crater radii from its centre: a bowl `depth` radii deep
+    (depth (x^2 - 1) inside) with a raised rim a fifth as high (Gaussian, width a quarter radius)."""
+    rim = 0.2 * depth * np.exp(-(((x - 1) / 0.25) ** 2))
+    return np.where(x < 1, 2 * depth * x, 0.0) - 2 * rim * (x - 1) / 0.25**2
+
+
+def _uniforms(cells: np.ndarray, salt: int, k: int) -> np.ndarray:
+    """k uniforms in [0, 1) per integer cell (... x 3): splitmix64 of the cell and `salt` (... x k)."""
+    c = cells.astype(np.int64).view(np.uint64)
+    x = (c[..., 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (c[..., 1] * np.uint64(0xC2B2AE3D27D4EB4F))
+    x ^= c[..., 2] * np.uint64(0x165667B19E3779F9) ^ np.uint64(salt)
+    out = np.empty((*cells.shape[:-1], k))
+    for i in range(k):
+        x = x + np.uint64(0x9E3779B97F4A7C15)
+        z = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        out[..., i] = ((z ^ (z >> np.uint64(31))) >> np.uint64(11)).astype(np.float64) / 2.0**53
+    return out
+
+
+def _cell_craters(bases: np.ndarray, cell: float, octave: int) -> tuple[np.ndarray, ...]:
+    """The craters of the 2 x 2 x 2 cells from each base cell (K x 3) of an octave: centres on the
+    sphere (K x M x 3, float32), radii (K x M), depths in radii and a fresh flag (K x M); the candidates
+    off the surface's shell are dropped (M: the most any base keeps; a row's padding has radius 0)."""
+    cells = bases[:, None, :] + np.array(list(np.ndindex(2, 2, 2)))  # K x 8 x 3
+    u = _uniforms(cells, MOON_SEED + 131 * octave, 6 * CANDIDATES).reshape(len(bases), -1, 6)
+    cells = np.repeat(cells, CANDIDATES, axis=1)  # candidates of a cell are adjacent in u's rows
+    centre = (cells + u[..., :3]) * cell
+    radius_3d = np.linalg.norm(centre, axis=-1)
+    radii = cell * (FINE_RADIUS[0] + (FINE_RADIUS[1] - FINE_RADIUS[0]) * u[..., 3] ** 2)
+    on_shell = np.abs(radius_3d - 1) < SHELL * cell
+    order = np.argsort(~on_shell, axis=1, kind="stable")[:, : max(1, on_shell.sum(axis=1).max())]
+    radii = np.where(on_shell, radii, 0.0)  # a candidate off the shell is no crater
+
+    def kept(a: np.ndarray) -> np.ndarray:  # each base's craters first, the columns none has dropped
+        return np.take_along_axis(a, order if a.ndim == 2 else order[..., None], axis=1)
+
+    centre = (centre / radius_3d[..., None]).astype(np.float32)
+    return kept(centre), kept(radii), kept(0.1 + 0.25 * u[..., 4]), kept(u[..., 5] < 0.15)
+
+
+def fine_craters(q: np.ndarray, footprint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(slope vectors N x 3, albedo factors N) of the craters smaller than the maps' at selenographic
+    unit vectors q seen with `footprint` Moon radii a pixel: the height gradient (tangent to the sphere,
+    dimensionless) summed over the octaves the footprint resolves, each faded in by RESOLVED_PX. Depths
+    are 0.05-0.18 of the diameter (degraded to fresh simple craters); one in seven is young, with a
+    bright floor and ejecta halo."""
+    slope, log_albedo = np.zeros_like(q), np.zeros(len(q))
+    for octave in range(FINE_OCTAVES):
+        cell = FINE_CELL / 2**octave
+        weight = np.clip((cell / footprint - RESOLVED_PX[0]) / (RESOLVED_PX[1] - RESOLVED_PX[0]), 0, 1)
+        idx = np.nonzero(weight > 0)[0]
+        if len(idx) == 0:
+            break  # finer octaves are smaller still
+        p = q[idx].astype(np.float32)
+        base = np.floor(q[idx] / cell - 0.5).astype(np.int64)  # the 2 x 2 x 2 cells nearest p start here
+        key = ((base[:, 0] + 2**20) << 42) | ((base[:, 1] + 2**20) << 21) | (base[:, 2] + 2**20)
+        unique, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+        centres, radii, depths, fresh = _cell_craters(base[first], cell, octave)
+        d = p[:, None, :] - centres[inverse]  # n x M x 3: from each candidate crater's centre
+        x2 = np.einsum("nmk,nmk->nm", d, d) / np.maximum(radii[inverse], 1e-30) ** 2
+        rows, cols = np.nonzero(x2 < REACH**2)
+        if len(rows) == 0:
+            continue
+        x, dh, p_h = np.sqrt(x2[rows, cols]), d[rows, cols], p[rows]
+        tangent = dh - np.sum(dh * p_h, axis=1, keepdims=True) * p_h
+        tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+        w = weight[idx[rows]]
+        k = inverse[rows]
+        contribution = (w * crater_profile_slope(x, depths[k, cols]))[:, None] * tangent
+        for axis in range(3):
+            slope[:, axis] += np.bincount(idx[rows], contribution[:, axis], minlength=len(q))
+        halo = w * fresh[k, cols] * np.log1p(0.4 * np.exp(-((x / 1.3) ** 4)))
+        log_albedo += np.bincount(idx[rows], halo, minlength=len(q))
+    return slope, np.exp(log_albedo)
+
+
+def moon_surface(
+    q: np.ndarray, n: np.ndarray, east: np.ndarray, north: np.ndarray, footprint: np.ndarray
+) -> tuple[np.ndarray, ...]:
     """(albedo N, shading normals N x 3) at selenographic unit vectors q, whose camera-frame normals are
-    n with local east and north unit vectors (N x 3 each): the normal tilted by the surface's slopes."""
+    n with local east and north unit vectors (N x 3 each), seen with `footprint` Moon radii a pixel: the
+    normal tilted by the slopes of the maps and of the fine craters."""
     albedo, d_lat, d_lon = moon_maps()
-    s_north, s_east = equirect(d_lat, q), equirect(d_lon, q)
+    fine_slope, fine_albedo = fine_craters(q, footprint)
+    east_q = np.stack([-q[:, 1], q[:, 0], np.zeros(len(q))], axis=1)  # selenographic east: z x q
+    east_q /= np.maximum(np.linalg.norm(east_q, axis=1, keepdims=True), 1e-9)
+    north_q = np.cross(q, east_q)
+    s_north = equirect(d_lat, q) + np.sum(fine_slope * north_q, axis=1)
+    s_east = equirect(d_lon, q) + np.sum(fine_slope * east_q, axis=1)
+    s_north, s_east = (np.clip(s, -MAX_SLOPE, MAX_SLOPE) for s in (s_north, s_east))
     tilted = n - s_east[:, None] * east - s_north[:, None] * north
-    return equirect(albedo, q), tilted / np.linalg.norm(tilted, axis=1, keepdims=True)
+    return equirect(albedo, q) * fine_albedo, tilted / np.linalg.norm(tilted, axis=1, keepdims=True)
