@@ -85,11 +85,10 @@ def _moon(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np
     east = np.cross(turn[2], n)  # turn[2]: the Moon's north pole in the camera frame
     east /= np.maximum(np.linalg.norm(east, axis=1, keepdims=True), 1e-9)
     footprint = _footprint(spec, n, rays[hit], centre)
-    albedo, shading = moon_surface(n @ turn.T, n, east, np.cross(n, east), footprint)
     sun = np.asarray(spec.sun.direction)
-    lit = np.clip(shading @ sun, 0, 1) * (n @ sun > 0)
+    reflectance = moon_surface(n @ turn.T, n, east, np.cross(n, east), footprint, sun)
     img = stars.copy()
-    img[hit] = spec.sun.irradiance * exposure_scale(spec) * (albedo * lit)[:, None] * MOON_TINT
+    img[hit] = spec.sun.irradiance * exposure_scale(spec) * reflectance[:, None] * MOON_TINT
     return img.astype(np.float32)
 
 

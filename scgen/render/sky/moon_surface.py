@@ -29,10 +29,10 @@ CRATER_RADIUS_DEG = (0.4, 12.0)
 RELIEF = 0.003  # rolling relief between craters: height deviation in Moon radii (5 km; LOLA's is ~2-3 km)
 MAX_SLOPE = 0.8  # tan of the steepest slope shaded (39 deg; the map's poles would give more)
 # The fine crater field: octave k has 3D cells of FINE_CELL / 2^k Moon radii; each cell holds CANDIDATES
-# crater centres, jittered in it and kept where they lie within SHELL cells of the surface, so that with
+# crater centres, jittered in it, kept where they lie within SHELL cells of the surface, so that with
 # reach (REACH radii) <= (0.5 - SHELL) cells the 2 x 2 x 2 cells nearest a point hold every crater that
 # touches it. Radii 0.08-0.22 cells: the first octave continues the map's smallest craters (12 km).
-FINE_CELL, FINE_OCTAVES, CANDIDATES, SHELL = 0.05, 9, 2, 0.15
+FINE_CELL, FINE_OCTAVES, CANDIDATES, SHELL = 0.05, 9, 3, 0.15
 FINE_RADIUS = (0.08, 0.22)  # of the cell
 REACH = 1.6  # crater radii: the raised rim's extent
 RESOLVED_PX = (4.0, 12.0)  # an octave fades in between these cell sizes in pixels (radii of ~0.6-1.8 px)
@@ -171,18 +171,29 @@ def fine_craters(q: np.ndarray, footprint: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def moon_surface(
-    q: np.ndarray, n: np.ndarray, east: np.ndarray, north: np.ndarray, footprint: np.ndarray
-) -> tuple[np.ndarray, ...]:
-    """(albedo N, shading normals N x 3) at selenographic unit vectors q, whose camera-frame normals are
-    n with local east and north unit vectors (N x 3 each), seen with `footprint` Moon radii a pixel: the
-    normal tilted by the slopes of the maps and of the fine craters."""
+    q: np.ndarray, n: np.ndarray, east: np.ndarray, north: np.ndarray, footprint: np.ndarray, sun: np.ndarray
+) -> np.ndarray:
+    """The sunlit Moon's reflectance (N: albedo x Lambert's cosine) at selenographic unit vectors q, whose
+    camera-frame normals are n with local east and north unit vectors (N x 3 each), seen with `footprint`
+    Moon radii a pixel, under the unit `sun` direction (camera frame).
+
+    The normal is tilted by the slopes of the maps and of the fine craters. Where the maps' terrain alone
+    faces away from the sun, it shadows what lies on it (a fine crater's sunward wall is not lit in the
+    shade of a large crater's wall), fading over the last 3 degrees; past the sphere's terminator, night.
+    """
     albedo, d_lat, d_lon = moon_maps()
     fine_slope, fine_albedo = fine_craters(q, footprint)
     east_q = np.stack([-q[:, 1], q[:, 0], np.zeros(len(q))], axis=1)  # selenographic east: z x q
     east_q /= np.maximum(np.linalg.norm(east_q, axis=1, keepdims=True), 1e-9)
     north_q = np.cross(q, east_q)
-    s_north = equirect(d_lat, q) + np.sum(fine_slope * north_q, axis=1)
-    s_east = equirect(d_lon, q) + np.sum(fine_slope * east_q, axis=1)
-    s_north, s_east = (np.clip(s, -MAX_SLOPE, MAX_SLOPE) for s in (s_north, s_east))
-    tilted = n - s_east[:, None] * east - s_north[:, None] * north
-    return equirect(albedo, q) * fine_albedo, tilted / np.linalg.norm(tilted, axis=1, keepdims=True)
+    map_north, map_east = equirect(d_lat, q), equirect(d_lon, q)
+    s_north = np.clip(map_north + np.sum(fine_slope * north_q, axis=1), -MAX_SLOPE, MAX_SLOPE)
+    s_east = np.clip(map_east + np.sum(fine_slope * east_q, axis=1), -MAX_SLOPE, MAX_SLOPE)
+
+    def cosine(slope_east: np.ndarray, slope_north: np.ndarray) -> np.ndarray:
+        tilted = n - slope_east[:, None] * east - slope_north[:, None] * north
+        return (tilted @ sun) / np.linalg.norm(tilted, axis=1)
+
+    terrain = np.clip(cosine(map_east, map_north) / np.sin(np.deg2rad(3.0)), 0, 1)
+    lit = np.clip(cosine(s_east, s_north), 0, 1) * terrain * (n @ sun > 0)
+    return equirect(albedo, q) * fine_albedo * lit
