@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test lint assets clean
+.PHONY: install demo test lint assets figures clean
 
 $(STAMP): pyproject.toml
 	@command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ] && ! dpkg -s libllvm19 >/dev/null 2>&1 \
@@ -29,8 +29,22 @@ test: install
 lint: install
 	$(BIN)/ruff check . && $(BIN)/ruff format --check .
 
+# every picture in docs/ that the generator draws, from today's code (about 15 min on 2 cores); the
+# learning curves and the predict sheet are training results, remade by the benchmarks that docs/index.md names
+figures: install
+	rm -rf .figures && mkdir .figures
+	$(BIN)/scgen preview --out .figures/preview --n 16 --quiet
+	cp .figures/preview/preview.png docs/preview.png
+	$(BIN)/python docs/camera_figure.py
+	$(BIN)/python docs/sky_figure.py
+	$(BIN)/scgen preview --sequence 1 --config examples/approach.toml --out .figures/sequence --backend mitsuba --quiet
+	$(BIN)/python -c "import cv2; cv2.imwrite('docs/sequence_strip.jpg', \
+	  cv2.imread('.figures/sequence/sequence_1.png'), [cv2.IMWRITE_JPEG_QUALITY, 88])"
+	$(BIN)/python benchmarks/camera_before_after.py --before b970dd6
+	rm -rf .figures
+
 assets: install
 	$(BIN)/python -m scgen.assets.build_spacecraft
 
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache
+	rm -rf $(VENV) demo_out .pytest_cache .figures
