@@ -30,18 +30,18 @@ AS_BEFORE_REALISM = {
 }
 
 
-def posenet_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """24 samples of seed 0 rendered with Mitsuba at 320x240 as before scgen's realism (AS_BEFORE_REALISM),
-    read-only for tests.
+def posenet_dataset(tmp_path_factory: pytest.TempPathFactory, seed: int = 0) -> Path:
+    """N_IMAGES samples of `seed` rendered with Mitsuba at 320x240 as before scgen's realism
+    (AS_BEFORE_REALISM), read-only for tests; seed 1's are scenes the seed-0 set never holds.
 
     Cached under the session's base temp dir (rendered to a sibling, then renamed), so every test
     module asking for it shares one rendering.
     """
-    out = tmp_path_factory.getbasetemp() / "posenet_ds"
+    out = tmp_path_factory.getbasetemp() / ("posenet_ds" if seed == 0 else f"posenet_ds_seed{seed}")
     if not out.is_dir():
-        tmp = out.with_name("posenet_ds.partial")
+        tmp = out.with_name(f"{out.name}.partial")
         job = RenderJob(
-            out=tmp, n=N_IMAGES, seed=0, backend="mitsuba", quality="draft", resolution=RESOLUTION,
+            out=tmp, n=N_IMAGES, seed=seed, backend="mitsuba", quality="draft", resolution=RESOLUTION,
             camera="ideal", overrides=AS_BEFORE_REALISM,
         )  # fmt: skip
         run_render(job, progress=False)
