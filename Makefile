@@ -23,7 +23,7 @@ demo: install
 
 test: install
 	$(BIN)/ruff check .
-	@echo "the suite: ~600 tests, 15-25 min on 2 cores (real renders and training runs); a dot per test"
+	@echo "the suite: ~600 tests, 35-45 min on 2 cores (real renders and training runs); a dot per test"
 	$(BIN)/pytest -q
 
 lint: install
