@@ -209,6 +209,19 @@ def test_the_example_config_gives_the_sequences_its_docs_say():
         assert frames[-1].sequence.range_m < frames[0].sequence.range_m
 
 
+def test_the_strip_config_is_the_approach_its_caption_says():
+    """examples/approach.toml (docs/sequence_strip.jpg, `make figures`): sequence 1 is 12 frames 10 s apart
+    of a tumbling target approached along the corridor from 20-25 m at 0.1-0.15 m/s."""
+    gen = Generator.load(config=Path(__file__).parents[1] / "examples" / "approach.toml")
+    frames = gen.sequence(1)
+    assert len(frames) == 12 and [f.sequence.time_s for f in frames[:2]] == [0.0, 10.0]
+    kinds = {(f.sequence.profile, f.sequence.attitude) for f in frames}
+    assert kinds == {("corridor_approach", "tumble")}
+    ranges = [f.sequence.range_m for f in frames]  # closing at 0.1-0.15 m/s for 110 s: 11-16.5 m nearer
+    assert 19.0 < ranges[0] < 26.0 and all(b <= a for a, b in zip(ranges, ranges[1:], strict=False))
+    assert ranges[0] - ranges[-1] > 5.0
+
+
 def test_preview_of_a_sequence_writes_its_frames_as_a_gif(tmp_path: Path):
     """`scgen preview --sequence K` animates every frame of sequence K; without a [sequence] table it is
     one line naming what is missing."""
