@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from posenet_control import render
-from posenet_learning import SEED, pct, run_script, schedule
+from posenet_learning import SEED, pct, positive, run_script, schedule
 
 from posenet.config import TrainConfig, load_config
 from posenet.errors import PosenetError
@@ -66,7 +66,7 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--data", type=Path, default=None, help="The control's dataset [rendered into OUT/data].")
     ap.add_argument("--variant", action="append", default=None, help="Repeatable [gdrnet, gap-gdrnet].")
     ap.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), help="Training seeds [0 1 2].")
-    ap.add_argument("--steps", type=int, default=STEPS, help="Steps of every run's schedule [%(default)s].")
+    ap.add_argument("--steps", type=positive, default=STEPS, help="Steps of each run [%(default)s].")
     ap.add_argument("--eval-workers", type=int, default=0, help="Evaluation loader processes [0].")
     return ap.parse_args()
 
@@ -160,8 +160,6 @@ def run(args: argparse.Namespace) -> None:
     variants = args.variant or list(VARIANTS)
     if len(set(variants)) < len(variants) or len(set(args.seeds)) < len(args.seeds):
         raise PosenetError("--variant and --seeds must not repeat a value")
-    if args.steps < 1:
-        raise PosenetError(f"--steps must be >= 1, got {args.steps}")
     args.out.mkdir(parents=True, exist_ok=True)
     data = args.data if args.data is not None else render(args.out, 2400, SEED)
     if not data.is_dir():

@@ -75,7 +75,7 @@ def _stamp_craters(rng: np.random.Generator, height: np.ndarray, albedo: np.ndar
     row_lat = np.deg2rad(90.0 - 180.0 * (np.arange(h) + 0.5) / h)
     col_lon = np.deg2rad(-180.0 + 360.0 * (np.arange(w) + 0.5) / w)
     for r, c, la, lo_c, young in zip(radii, centres, lat_c, lon_c, fresh, strict=True):
-        reach = 1.6 * r
+        reach = REACH * r
         rows = np.nonzero(np.abs(row_lat - la) <= reach)[0]
         if np.cos(la) - reach <= 0.05:  # touches a pole: every longitude
             cols = np.arange(w)
@@ -150,7 +150,7 @@ def fine_craters(q: np.ndarray, footprint: np.ndarray) -> tuple[np.ndarray, np.n
         p = q[idx].astype(np.float32)
         base = np.floor(q[idx] / cell - 0.5).astype(np.int64)  # the 2 x 2 x 2 cells nearest p start here
         key = ((base[:, 0] + 2**20) << 42) | ((base[:, 1] + 2**20) << 21) | (base[:, 2] + 2**20)
-        unique, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
         centres, radii, depths, fresh = _cell_craters(base[first], cell, octave)
         d = p[:, None, :] - centres[inverse]  # n x M x 3: from each candidate crater's centre
         x2 = np.einsum("nmk,nmk->nm", d, d) / np.maximum(radii[inverse], 1e-30) ** 2
