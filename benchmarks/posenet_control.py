@@ -100,11 +100,11 @@ def parse_args() -> argparse.Namespace:
     return ap.parse_args()
 
 
-def render(out: Path, n: int, seed: int) -> Path:
-    """The control set in OUT/data (resumed when a render is there)."""
+def render(out: Path, n: int, seed: int, scene: dict[str, Any] = SCENE) -> Path:
+    """The control set (or `scene`'s variant of it) in OUT/data, resumed when a render is there."""
     data = out / "data"
     job = RenderJob(out=data, n=n, seed=seed, backend=BACKEND, resolution=RESOLUTION, workers=WORKERS,
-                    overrides=SCENE)  # fmt: skip
+                    overrides=scene)  # fmt: skip
     s = run_render(job, progress=True)
     print(f"dataset: {data}, rendered {s['rendered']}, reused {s['skipped']}, {s['total_s']:.0f} s; "
           + ", ".join(f"{k} {v}" for k, v in s["splits"].items()))  # fmt: skip

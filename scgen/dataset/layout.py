@@ -91,6 +91,11 @@ class Layout:
         return self.root / METADATA_FILE
 
     @property
+    def config_path(self) -> Path:
+        """The resolved generator config (every sampling distribution) the dataset was rendered with."""
+        return self.root / "config.json"
+
+    @property
     def splits_path(self) -> Path:
         return self.root / "splits.json"
 

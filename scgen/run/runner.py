@@ -180,7 +180,7 @@ def write_static_files(layout: Layout, generator: Generator, farthest_m: float |
     camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
               "height": cam["height"], "depth_scale": depth_scale}  # fmt: skip
     atomic_write_text(layout.camera_path, dumps(camera))
-    atomic_write_text(layout.root / "config.json", dumps(generator.cfg))
+    atomic_write_text(layout.config_path, dumps(generator.cfg))
     write_model_dir(generator.model, layout.models_dir, OBJ_ID)
     write_eval_model_dir(generator.model, layout.models_eval_dir, OBJ_ID)
 
