@@ -1,6 +1,6 @@
 """posenet accuracy against the attitude range: the corridor control widened, at equal compute.
 
-    python benchmarks/posenet_range.py --out OUT [--angles 20 45 90 180] [--steps 1260] [--curriculum 20]
+    python benchmarks/posenet_range.py --out OUT [--angles 20 45 90 180] [--steps 1260]
 
 For each cone half-angle A renders the corridor control's set with only the attitude range changed
 (benchmarks/posenet_control.py's scene: 2,400 Mitsuba images at 320x240, seed 7, the target 120-180 px
@@ -11,13 +11,9 @@ ablation's schedule: benchmarks/posenet_ablation.py, seed 0) for --steps on each
 test split (480 images, ground-truth boxes). Beside each point, what the corridor alone scores: the
 nominal attitude as the estimate (posenet_control.prior).
 
---curriculum DEG adds the attitude curriculum on the widest set at the same steps (`data.curriculum_deg`:
-training starts on the images whose line of sight lies within DEG of the nominal one and widens to all
-of them over the first half of the schedule), tested on the same split as its plain run.
-
 Resumable: renders resume, a finished run (its result.json) is kept. After each run OUT/range.json and
 OUT/range.png (test rotation median and ADD@0.1d against the half-angle) are rewritten. On 2 cores:
-about 15 min of rendering and 12-15 min of training per point.
+about 18 min of rendering and 12-15 min of training per point.
 """
 
 from __future__ import annotations
@@ -45,7 +41,6 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--angles", type=float, nargs="+", default=list(ANGLES), help="Half-angles (deg).")
     ap.add_argument("--steps", type=positive, default=STEPS, help="Steps of each run [%(default)s].")
     ap.add_argument("--seed", type=int, default=0, help="Training seed [%(default)s].")
-    ap.add_argument("--curriculum", type=float, default=None, help="Also a curriculum from DEG.")
     return ap.parse_args()
 
 
@@ -54,16 +49,12 @@ def scene(angle: float) -> dict[str, Any]:
     return {**SCENE, "pose": {**SCENE["pose"], "max_angle_deg": angle, "roll_deg": [-angle, angle]}}
 
 
-def point(out: Path, angle: float, steps: int, seed: int, curriculum: float | None = None) -> dict[str, Any]:
+def point(out: Path, angle: float, steps: int, seed: int) -> dict[str, Any]:
     """Render (or resume) the set of half-angle `angle`, train one run on it and test it."""
     data = render(out / f"cone-{angle:g}", N, SEED, scene(angle))
     cfg = run_config(VARIANT, seed, steps, data)
-    name = f"run-{VARIANT}-seed{seed}"
-    if curriculum is not None:
-        cfg.data.curriculum_deg = curriculum
-        name = f"run-{VARIANT}-curriculum{curriculum:g}-seed{seed}"
-    result = train_one(data, data.parent / name, cfg, steps, eval_workers=0)
-    return {"angle": angle, "curriculum": curriculum, "steps": steps, "seed": seed,
+    result = train_one(data, data.parent / f"run-{VARIANT}-seed{seed}", cfg, steps, eval_workers=0)
+    return {"angle": angle, "steps": steps, "seed": seed,
             "train_wall_s": result["train_wall_s"], "test": result["test"], "prior": prior(data)}  # fmt: skip
 
 
@@ -73,16 +64,12 @@ def plot(path: Path, points: list[dict[str, Any]], steps: int) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    plain = sorted((p for p in points if p["curriculum"] is None), key=lambda p: p["angle"])
-    x = [p["angle"] for p in plain]
+    points = sorted(points, key=lambda p: p["angle"])
+    x = [p["angle"] for p in points]
     fig, ax = plt.subplots(figsize=(8, 5))
-    ax.plot(x, [p["test"]["re_deg_median"] for p in plain], "o-", color="tab:red", label="rotation median")
-    ax.plot(x, [p["prior"]["re_deg_median"] for p in plain], "o:", color="tab:red", alpha=0.5,
+    ax.plot(x, [p["test"]["re_deg_median"] for p in points], "o-", color="tab:red", label="rotation median")
+    ax.plot(x, [p["prior"]["re_deg_median"] for p in points], "o:", color="tab:red", alpha=0.5,
             label="the nominal attitude alone")  # fmt: skip
-    for p in points:
-        if p["curriculum"] is not None:
-            ax.plot([p["angle"]], [p["test"]["re_deg_median"]], "D", color="tab:purple",
-                    label=f"curriculum from {p['curriculum']:g} deg")  # fmt: skip
     ax.axhline(CHANCE_RE_DEG, color="grey", ls="--", alpha=0.6)
     ax.text(x[0] if x else 0, CHANCE_RE_DEG, f" a random rotation: {CHANCE_RE_DEG:.0f} deg", color="grey",
             va="bottom")  # fmt: skip
@@ -91,7 +78,7 @@ def plot(path: Path, points: list[dict[str, Any]], steps: int) -> None:
     ax.set_ylim(0, 140)
     ax.set_xticks(x)
     ax2 = ax.twinx()
-    ax2.plot(x, [100 * p["test"]["add_0.1d"] for p in plain], "s-", color="tab:blue", label="ADD@0.1d")
+    ax2.plot(x, [100 * p["test"]["add_0.1d"] for p in points], "s-", color="tab:blue", label="ADD@0.1d")
     ax2.set_ylabel("test ADD@0.1d (%)", color="tab:blue")
     ax2.set_ylim(0, 100)
     lines = [h for a in (ax, ax2) for h in a.get_legend_handles_labels()[0]]
@@ -105,18 +92,14 @@ def plot(path: Path, points: list[dict[str, Any]], steps: int) -> None:
 
 def run(args: argparse.Namespace) -> list[dict[str, Any]]:
     args.out.mkdir(parents=True, exist_ok=True)
-    wanted = [(a, None) for a in args.angles]
-    if args.curriculum is not None:
-        wanted.append((max(args.angles), args.curriculum))
     points = []
-    for angle, curriculum in wanted:
-        p = point(args.out, angle, args.steps, args.seed, curriculum)
+    for angle in args.angles:  # in the order given: the most telling point first, if time is short
+        p = point(args.out, angle, args.steps, args.seed)
         points.append(p)
         atomic_write_text(args.out / "range.json", json.dumps({"points": points}, indent=1) + "\n")
         plot(args.out / "range.png", points, args.steps)
         s = p["test"]
-        label = f"{angle:g} deg" + (f", curriculum from {curriculum:g} deg" if curriculum is not None else "")
-        print(f"{label}: rotation median {s['re_deg_median']:.1f} deg (nominal alone "
+        print(f"{angle:g} deg: rotation median {s['re_deg_median']:.1f} deg (nominal alone "
               f"{p['prior']['re_deg_median']:.1f}), ADD@0.1d {pct(s['add_0.1d'])} %, ADD-S@0.1d "
               f"{pct(s['adds_0.1d'])} %, translation alone {pct(s['te_0.1d'])} %", flush=True)  # fmt: skip
     print(f"wrote {args.out / 'range.json'} and {args.out / 'range.png'}")

@@ -67,11 +67,6 @@ class DataConfig:
     # > 0: train on this many images of the train split, the first of one fixed shuffled order, so that a
     # smaller set lies inside a larger one (accuracy against data: benchmarks/posenet_data_curve.py)
     train_images: int = 0
-    # > 0: an attitude curriculum (data/curriculum.py): training starts on the instances whose line of
-    # sight lies within this many degrees of the dataset's nominal one, and the corridor widens to all of
-    # them over the first `curriculum_widen` of the schedule (issue 51's lever; docs/benchmarks.md)
-    curriculum_deg: float = 0.0
-    curriculum_widen: float = 0.5
 
 
 @dataclass
@@ -269,8 +264,5 @@ def _validate(cfg: TrainConfig) -> None:
         raise PosenetError(f"optim.amp must be one of {', '.join(AMP_MODES)}, got {o.amp!r}")
     if d.workers < 0 or o.threads < 0 or d.train_images < 0:
         raise PosenetError("data.workers, data.train_images and optim.threads must be >= 0")
-    if not 0.0 <= d.curriculum_deg <= 180.0 or not 0.0 < d.curriculum_widen <= 1.0:
-        raise PosenetError(f"data.curriculum_deg must lie in [0, 180] and data.curriculum_widen in (0, 1], "
-                           f"got {d.curriculum_deg} and {d.curriculum_widen}")  # fmt: skip
     if not 0.0 <= o.anneal_point <= 1.0:
         raise PosenetError(f"optim.anneal_point must lie in [0, 1], got {o.anneal_point}")

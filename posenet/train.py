@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any
 
 import cv2
-import numpy as np
 import torch
 import torch.distributed as dist
 from timm.optim import create_optimizer_v2
@@ -33,8 +32,7 @@ from posenet.amp import Precision
 from posenet.budget import PROBE_STEPS, TimeBudget, run_budget
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
 from posenet.config import OptimConfig, TrainConfig, config_from_dict
-from posenet.data import CurriculumSampler, EpochSampler, PoseDataset, open_split
-from posenet.data.curriculum import line_of_sight_tilt_deg, read_nominal_rotation
+from posenet.data import EpochSampler, PoseDataset, open_split
 from posenet.data.layout import scan_split
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
@@ -326,11 +324,7 @@ def _set_up(
     state = load_checkpoint(out / LAST, kind="pose") if resume else None
     # a resumed run keeps the schedule it started with (a time budget's fitted one included)
     total = (state or {}).get("schedule_steps") or o.epochs * steps_per_epoch(len(dataset), o, world)
-    sampler = (
-        curriculum_sampler(data, dataset, cfg, world, rank, budget.total if budget else total)
-        if cfg.data.curriculum_deg > 0
-        else EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
-    )
+    sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
     stop = (
         budget.total if budget else stop_step(total, max_steps, o.epochs, sampler.steps_per_epoch, rank == 0)
     )
@@ -344,10 +338,6 @@ def _set_up(
         for line in summary_lines(data, cfg, len(dataset), sampler.steps_per_epoch, total, step, stop, device,
                                   precision, world, budget):  # fmt: skip
             tqdm.write(line)
-        if isinstance(sampler, CurriculumSampler):
-            tqdm.write(f"curriculum: from {sampler.eligible(0)} of {sampler.n} instances (line of sight "
-                       f"within {cfg.data.curriculum_deg:g} deg of the nominal's) to all by step "
-                       f"{sampler.widen_steps}")  # fmt: skip
     run = _Run(
         cfg=cfg,
         model=model,
@@ -368,19 +358,6 @@ def _set_up(
     clock.lap("loader")
     run.startup = clock if rank == 0 else None
     return run
-
-
-def curriculum_sampler(
-    data: Path, dataset: PoseDataset, cfg: TrainConfig, world: int, rank: int, total: int
-) -> CurriculumSampler:
-    """The attitude curriculum's sampler (data.curriculum_deg > 0): its corridor about the dataset's
-    nominal line of sight widens to every instance over the first data.curriculum_widen of `total` steps."""
-    o, d = cfg.optim, cfg.data
-    R = np.stack([i.R for i in dataset.instances])
-    t = np.stack([i.t for i in dataset.instances])
-    tilts = line_of_sight_tilt_deg(R, t, read_nominal_rotation(data))
-    return CurriculumSampler(tilts, o.batch_size // world, world, rank, o.seed, d.curriculum_deg,
-                             round(d.curriculum_widen * total))  # fmt: skip
 
 
 def summary_lines(

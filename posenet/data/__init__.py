@@ -1,6 +1,6 @@
 """Reading scgen / BOP-layout datasets into RoI samples with GDR-Net targets (see dataset.py)."""
 
 from posenet.data.dataset import PoseDataset, open_split
-from posenet.data.sampler import CurriculumSampler, EpochSampler
+from posenet.data.sampler import EpochSampler
 
-__all__ = ["CurriculumSampler", "EpochSampler", "PoseDataset", "open_split"]
+__all__ = ["EpochSampler", "PoseDataset", "open_split"]

@@ -9,11 +9,8 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-import numpy as np
 import torch
 from torch.utils.data import Sampler
-
-from posenet.data.curriculum import cone_cap_deg
 
 
 class EpochSampler(Sampler[tuple[int, int]]):
@@ -40,32 +37,3 @@ class EpochSampler(Sampler[tuple[int, int]]):
 
     def __len__(self) -> int:
         return (self.steps_per_epoch - self.skip_batches) * self.batch_size
-
-
-class CurriculumSampler(EpochSampler):
-    """EpochSampler's steps, each batch drawn (with replacement) from the instances inside the attitude
-    curriculum's corridor at that step (curriculum.py): `start_deg` about the nominal line of sight at
-    step 0, every instance from step `widen_steps` on. The draws depend only on (seed, epoch), so a
-    resumed run sees the batches it would have seen."""
-
-    def __init__(self, tilts_deg: np.ndarray, batch_size: int, world: int, rank: int, seed: int,
-                 start_deg: float, widen_steps: int) -> None:  # fmt: skip
-        super().__init__(len(tilts_deg), batch_size, world, rank, seed)
-        self.order = torch.from_numpy(np.argsort(tilts_deg, kind="stable"))
-        self.sorted_tilts = np.sort(tilts_deg)
-        self.start_deg, self.widen_steps = start_deg, max(1, widen_steps)
-
-    def eligible(self, step: int) -> int:
-        """How many instances (the least tilted first) the corridor holds at `step`: at least a batch."""
-        cap = cone_cap_deg(self.start_deg, step / self.widen_steps)
-        inside = int(np.searchsorted(self.sorted_tilts, cap, side="right"))
-        return min(self.n, max(inside, self.batch_size * self.world))
-
-    def __iter__(self) -> Iterator[tuple[int, int]]:
-        g = torch.Generator().manual_seed(self.seed * 100_003 + self.epoch)
-        per_step = self.batch_size * self.world
-        first = self.epoch * self.steps_per_epoch
-        draws = [self.order[torch.randint(self.eligible(first + b), (per_step,), generator=g)]
-                 for b in range(self.steps_per_epoch)]  # fmt: skip
-        mine = [i for d in draws[self.skip_batches :] for i in d[self.rank :: self.world].tolist()]
-        return ((self.epoch, i) for i in mine)
