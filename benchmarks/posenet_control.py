@@ -70,6 +70,7 @@ from posenet.geometry import roi_translation
 from posenet.metrics import add_error, depth_error_rel, rotation_error_deg, translation_error
 from posenet.ransac import MIN_POINTS
 from posenet.train import train
+from scgen.dataset.layout import Layout
 from scgen.io.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 from scgen.scenes.attitude import nominal_rotation, ray_rotation
@@ -115,7 +116,7 @@ def prior(data: Path, obj_id: int = 1) -> dict[str, float]:
     """What knowing the corridor alone scores on the test split: the nominal attitude at the true
     translation (rotation error, ADD@0.1d of the rotation) and the train split's median depth along the
     true ray (ADD@0.1d of the translation, median depth error)."""
-    R0 = nominal_rotation(json.loads((data / "config.json").read_text())["pose"])
+    R0 = nominal_rotation(json.loads(Layout(data).config_path.read_text())["pose"])
     train_z = float(np.median([i.t[2] for i in scan_split(data, "train", obj_id)]))
     test = [i for i in scan_split(data, "test", obj_id) if i.px_count_visib > 0]
     R_gt, t_gt = (torch.from_numpy(np.stack([getattr(i, k) for i in test])) for k in ("R", "t"))

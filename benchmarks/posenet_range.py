@@ -32,7 +32,6 @@ from scgen.io.atomic import atomic_write_text
 
 ANGLES = (20.0, 45.0, 90.0, 180.0)
 VARIANT = "gdrnet"  # the ablation's pick on a CPU (docs/benchmarks.md)
-FIGURES = ("re_deg_median", "add_0.1d", "add_0.02m", "adds_0.1d", "te_0.1d", "tz_rel_median")
 
 
 def parse_args() -> argparse.Namespace:
@@ -71,7 +70,7 @@ def plot(path: Path, points: list[dict[str, Any]], steps: int) -> None:
     ax.plot(x, [p["prior"]["re_deg_median"] for p in points], "o:", color="tab:red", alpha=0.5,
             label="the nominal attitude alone")  # fmt: skip
     ax.axhline(CHANCE_RE_DEG, color="grey", ls="--", alpha=0.6)
-    ax.text(x[0] if x else 0, CHANCE_RE_DEG, f" a random rotation: {CHANCE_RE_DEG:.0f} deg", color="grey",
+    ax.text(x[0], CHANCE_RE_DEG, f" a random rotation: {CHANCE_RE_DEG:.0f} deg", color="grey",
             va="bottom")  # fmt: skip
     ax.set_xlabel("attitude range: cone half-angle = roll half-range (deg); 180 = every attitude")
     ax.set_ylabel("test rotation error, median (deg)", color="tab:red")
@@ -84,7 +83,8 @@ def plot(path: Path, points: list[dict[str, Any]], steps: int) -> None:
     lines = [h for a in (ax, ax2) for h in a.get_legend_handles_labels()[0]]
     ax.legend(lines, [h.get_label() for h in lines], loc="center right", fontsize=8)
     ax.grid(True, alpha=0.3)
-    ax.set_title(f"GDR-Net, CPU recipe, {steps} steps each (2,400 images, 1,680 train); 480 test images")
+    ax.set_title(f"GDR-Net, CPU recipe, {steps} steps each ({N:,} images a set); {points[0]['test']['n']} "
+                 "test images")  # fmt: skip
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
