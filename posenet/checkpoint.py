@@ -9,7 +9,7 @@ from typing import Any
 import torch
 
 from posenet.errors import PosenetError
-from posenet.models import ModelConfig
+from posenet.models import ModelConfig, PoseNet, create_model
 from scgen.io import atomic_write_bytes
 
 REQUIRED = ("model", "model_config", "config", "step")
@@ -57,3 +57,19 @@ def check_model_config(state: dict[str, Any], expected: dict[str, Any], path: Pa
         diff = sorted(k for k in set(found) | set(expected) if found.get(k) != expected.get(k))
         detail = ", ".join(f"{k}: {found.get(k)!r} != {expected.get(k)!r}" for k in diff[:4])
         raise PosenetError(f"checkpoint {path} is from another configuration ({detail})")
+
+
+def load_model(ckpt: Path, device: torch.device) -> tuple[PoseNet, dict[str, Any]]:
+    """The network of a checkpoint, in eval mode on `device`, and the checkpoint itself."""
+    state = load_checkpoint(ckpt, kind="pose")
+    return model_from_state(state, ckpt, device), state
+
+
+def model_from_state(state: dict[str, Any], ckpt: Path, device: torch.device) -> PoseNet:
+    """The network of an already loaded pose checkpoint `state` (read from `ckpt`), in eval mode."""
+    model = create_model(**state["model_config"])
+    try:
+        model.load_state_dict(state["model"])
+    except RuntimeError as exc:
+        raise PosenetError(f"checkpoint {ckpt} does not match its own model configuration") from exc
+    return model.to(device).eval()

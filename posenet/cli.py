@@ -12,41 +12,38 @@ import cv2
 import torch
 from tqdm import tqdm
 
-from posenet.amp import AMP_MODES
-from posenet.bench import PAPER, device_label, format_report, resolve_device, run_bench
-from posenet.checkpoint import load_checkpoint
-from posenet.config import config_from_dict, load_config
+from posenet.checkpoint import load_checkpoint, load_model
+from posenet.config import AMP_MODES, config_from_dict, load_config
 from posenet.data.boxes import boxes_from_gt
 from posenet.data.layout import scan_split
 from posenet.detection.detect import detect_split, detection_entries
 from posenet.detection.detector import load_detector_config
 from posenet.detection.train import BEST, train_detector
 from posenet.errors import PosenetError
-from posenet.evaluate import (
+from posenet.evaluation.evaluate import (
     BATCH_SIZE,
-    bop_results_csv,
     by_factor_table,
     evaluate_pnp,
     format_table,
     json_record,
-    load_model,
     summary_rows,
 )
-from posenet.evaluate import by_factor as run_by_factor
+from posenet.evaluation.evaluate import by_factor as run_by_factor
+from posenet.evaluation.sequences import per_sequence, sequence_table
+from posenet.evaluation.viz import heatmap_panel, overlay_panel
+from posenet.export.bench import PAPER, device_label, format_report, resolve_device, run_bench
 from posenet.models import VARIANTS
 from posenet.predict.inputs import predict_inputs
+from posenet.predict.ransac import PNP_LABELS, PNP_METHODS
 from posenet.predict.run import FORMATS as PREDICT_FORMATS
 from posenet.predict.run import run_predict
-from posenet.ransac import PNP_LABELS, PNP_METHODS
-from posenet.sequences import per_sequence, sequence_table
-from posenet.train import train as run_train
-from posenet.viz import heatmap_panel, overlay_panel
+from posenet.training.train import train as run_train
 from scgen.cli import one_line_errors, preset_intrinsics
-from scgen.io import ScgenError, check_output, make_output_folder, write_output
+from scgen.io import ScgenError, bop, check_output, make_output_folder, write_output
 
 PATH = click.Path(path_type=Path)
 
-# posenet train's and train-detector's: both fit their schedule with posenet.budget
+# posenet train's and train-detector's: both fit their schedule with posenet.training.budget
 minutes_option = click.option(
     "--minutes",
     type=click.FloatRange(min=0, min_open=True),
@@ -225,7 +222,7 @@ def eval_cmd(
         write_output(json_path, json.dumps({"variant": variant, "split": split, **body}, indent=2) + "\n")
     click.echo(f"predictions: {predictions}")
     if bop_csv is not None:
-        write_output(bop_csv, bop_results_csv(results[methods[0]].records))
+        write_output(bop_csv, bop.results_csv(results[methods[0]].records))
         click.echo(f"BOP results: {bop_csv}")
 
 
@@ -366,7 +363,12 @@ def export_cmd(
     xyz, region, rot6d, site. Checks onnxruntime's outputs against torch's on a random batch of 2. With
     --detector, also the detector's best box and score for one image of the pose network's training camera
     (what `posenet predict --onnx POSE.onnx --detector DET.onnx` runs)."""
-    from posenet.onnx_export import OPSET, export_onnx, max_difference, onnx_session  # ~0.6 s: only here
+    from posenet.export.onnx_export import (  # ~0.6 s: only here
+        OPSET,
+        export_onnx,
+        max_difference,
+        onnx_session,
+    )
 
     if (detector is None) != (detector_onnx is None):
         raise PosenetError("--detector and --detector-onnx go together")
@@ -390,7 +392,7 @@ def export_cmd(
 def export_detector_graph(detector: Path, path: Path, pose_state: dict, ckpt: Path) -> None:
     """The detector's DetectorBestBox graph at the size of the pose checkpoint's training camera."""
     from posenet.detection.detect import load_detector
-    from posenet.onnx_export import export_detector_onnx
+    from posenet.export.onnx_export import export_detector_onnx
 
     if "camera" not in pose_state:
         raise PosenetError(

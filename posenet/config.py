@@ -27,12 +27,12 @@ from typing import Any
 
 import yaml
 
-from posenet.amp import AMP_MODES
 from posenet.errors import PosenetError
 from posenet.models import PRESETS, ModelConfig
 from posenet.models.backbone import IMAGENET, PACKAGE
 from scgen.io import NUMBER_FORM, load_yaml
 
+AMP_MODES = ("auto", "off", "bf16", "fp16")  # optim.amp: posenet.training.amp resolves them
 AUGMENTS = ("paper", "spnv2", "gdrnet-occlusion")  # data.augment: posenet.data.photometric's chains
 # what a value of each field type looks like in a config file, for the message of a wrongly typed one
 EXPECTED_FORM = {float: NUMBER_FORM, int: "a whole number such as 8", bool: "true or false", str: "a string"}
@@ -101,7 +101,8 @@ class OptimConfig:
     threads: int = 0  # CPU threads for training (0: one per core); pinned so a run's losses are reproducible
     log_every: int = 10  # TensorBoard scalar interval (steps)
     ckpt_every: int = 1  # epochs between rewrites of OUT/last.pt (it is always written when a run stops)
-    # mixed precision (posenet.amp): auto (bf16 on a CUDA GPU that has it, else float32) | off | bf16 | fp16
+    # mixed precision (posenet.training.amp): auto (bf16 on a CUDA GPU that has it, else float32) | off |
+    # bf16 | fp16
     amp: str = "auto"
     # Ranger's gradient centralisation (GDR-Net's default): each conv / FC weight's gradient minus its mean
     grad_centralization: bool = False

@@ -97,3 +97,9 @@ def decode_pose(out: dict[str, Tensor], roi: dict[str, Tensor]) -> tuple[Tensor,
     (`K`, `crop_center`, `box_wh`, `resize_ratio`)."""
     t = roi_translation(out["site"], roi)
     return allo_to_ego(rot6d_to_mat(out["rot6d"]), t), t
+
+
+def mask_probability(mask: Tensor, kind: str) -> Tensor:
+    """The visible-mask probability that a mask channel trained with loss `kind` stands for: the sigmoid
+    of a logit ('bce'), the raw value clipped to [0, 1] ('l1')."""
+    return mask.sigmoid() if kind == "bce" else mask.clamp(0.0, 1.0)

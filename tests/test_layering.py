@@ -28,9 +28,31 @@ FLOORS = (
 )
 # the package root's lazy `scgen.Generator` (__getattr__): the API's front door, loaded on first use only
 FRONT_DOOR = "scgen -> scgen.generator"
+# posenet's floors, bottom first (docs/architecture.md), held as scgen's are
+POSENET_FLOORS = (
+    ("posenet", "posenet.errors", "posenet.geometry"),
+    ("posenet.models",),
+    ("posenet.config", "posenet.checkpoint"),
+    ("posenet.data",),
+    ("posenet.training",),
+    ("posenet.detection",),
+    ("posenet.export",),
+    ("posenet.predict",),
+    ("posenet.evaluation",),
+    ("posenet.cli", "posenet.console"),
+)
+# the package root's lazy facade (posenet.API): the Python API's front door, loaded on first use only
+POSENET_FACADE = {
+    "posenet.train": "posenet.training.train",
+    "posenet.evaluate": "posenet.evaluation.evaluate",
+    "posenet.Predictor": "posenet.predict.predictor",
+    "posenet.Pose": "posenet.predict.predictor",
+    "posenet.make_camera": "posenet.data.camera",
+}
 LAZY = {
     "scgen.Generator": "scgen.generator",
     "scgen.Sample": "scgen.generator",
+    **POSENET_FACADE,
 }  # `from scgen import Generator`
 POSENET_GATE = "scgen.io"  # the one module posenet reads scgen datasets through
 CLI_MODULES = {"scgen/cli.py", "posenet/cli.py", "posenet/console.py"}
@@ -159,6 +181,28 @@ def test_scgen_imports_only_downward() -> None:
     assert [m for m in sorted(modules) if floor(m, FLOORS) is None] == []  # every module has a floor
     assert upward_imports(ROOT, "scgen", FLOORS) == [FRONT_DOOR]
     assert "scgen.generator" not in loaded_modules("scgen")
+
+
+def test_posenet_imports_only_downward() -> None:
+    modules = {module_name(ROOT, p) for p in (ROOT / "posenet").rglob("*.py")}
+    assert [m for m in sorted(modules) if floor(m, POSENET_FLOORS) is None] == []  # every module has a floor
+    assert upward_imports(ROOT, "posenet", POSENET_FLOORS) == []
+    assert not set(POSENET_FACADE.values()) & loaded_modules("posenet")  # the facade loads on first use
+
+
+def test_posenet_facade_is_the_documented_api() -> None:
+    """`posenet.X` for each name of the facade is the object its module defines."""
+    import posenet
+
+    assert {f"posenet.{n}": m for n, m in posenet.API.items()} == POSENET_FACADE
+    for name, module in posenet.API.items():
+        assert getattr(posenet, name).__module__ == module
+
+
+def test_posenet_top_level_holds_at_most_eight_modules() -> None:
+    """The rest lives in the folders of the data flow: data, models, training, detection, export,
+    predict, evaluation."""
+    assert len(list((ROOT / "posenet").glob("*.py"))) <= 8
 
 
 def test_the_floor_check_sees_the_api_reached_through_the_package_root() -> None:

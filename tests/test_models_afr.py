@@ -6,7 +6,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from posenet.featviz import feature_response
+from posenet.evaluation.featviz import feature_response
 from posenet.models.afr import AFR, GGCA, MECS, channel_descriptors
 from posenet.models.pnp import PGSA
 

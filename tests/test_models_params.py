@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from posenet.bench import PAPER
+from posenet.export.bench import PAPER
 from posenet.models import VARIANTS, create_model
 from posenet.models.afr import AFR, GGCA, MECS
 from posenet.models.pnp import PGSA

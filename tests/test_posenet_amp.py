@@ -11,9 +11,9 @@ import torch
 from click.testing import CliRunner
 from posenet_helpers import TINY_POSE, posenet_dataset
 
-from posenet.amp import Precision, resolve_amp
 from posenet.cli import main
 from posenet.config import OptimConfig, smoke_config
+from posenet.training.amp import Precision, resolve_amp
 
 STEPS = 4
 

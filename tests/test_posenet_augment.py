@@ -112,7 +112,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from posenet.config import config_from_dict
-from posenet.train import train
+from posenet.training.train import train
 cv2.GaussianBlur(np.zeros((64, 64, 3), np.uint8), (0, 0), 1.0)  # OpenCV's thread pool, used in this process
 cfg = config_from_dict({"preset": "smoke", "data": {"workers": 1},
                         "model": {"input_res": 64, "output_res": 16, "head_channels": 32, "pnp_channels": 32,
@@ -126,7 +126,7 @@ def test_opencv_used_in_the_training_process_does_not_hang_its_loader_processes(
 ) -> None:
     """OpenCV's thread pool does not survive a fork: once the training process has used it (a blur here;
     in a pytest session, the tests that ran before), a forked loader process hung for ever in worker_init's
-    cv2.setNumThreads, until posenet.train.before_loader_fork."""
+    cv2.setNumThreads, until posenet.training.train.before_loader_fork."""
     cmd = [sys.executable, "-c", FORK_AFTER_POOL, str(dataset_dir), str(tmp_path / "run")]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]

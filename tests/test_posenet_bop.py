@@ -19,10 +19,10 @@ from posenet_helpers import posenet_dataset
 from posenet.cli import main
 from posenet.data.layout import scan_split
 from posenet.data.object_model import load_object_model
-from posenet.evaluate import bop_results_csv, per_image_times
+from posenet.evaluation.evaluate import per_image_times
+from posenet.evaluation.metrics import sample_errors, summarise
 from posenet.geometry import rot6d_to_mat
-from posenet.losses import PmObject, closest_symmetric_rotation, pm_loss
-from posenet.metrics import sample_errors, summarise
+from posenet.training.losses import PmObject, closest_symmetric_rotation, pm_loss
 from scgen.io import bop
 
 TINY = """\
@@ -182,7 +182,7 @@ def test_bop_csv_times_are_per_image_and_poses_round_trip(tmp_path: Path) -> Non
     records = per_image_times(records)
     assert [r["time_s"] for r in records] == pytest.approx([0.04, 0.04, 0.02])
     path = tmp_path / "posenet_scgen-test.csv"
-    path.write_text(bop_results_csv(records))
+    path.write_text(bop.results_csv(records))
     header, rows = parse_bop_csv(path)
     assert ",".join(header) == BOP_HEADER and len(rows) == 3
     for r, row in zip(records, rows, strict=True):

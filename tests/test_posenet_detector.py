@@ -27,8 +27,8 @@ from posenet.detection.detector import (
     visible_boxes,
 )
 from posenet.detection.segmenter import JOIN_SHARE, mask_box
-from posenet.evaluate import by_factor, evaluate
-from posenet.metrics import headline_add
+from posenet.evaluation.evaluate import by_factor, evaluate
+from posenet.evaluation.metrics import headline_add
 from scgen.cli import main as scgen_main
 
 # the cpu preset as a user gets it, on one thread (the machine is shared; same losses every run)
@@ -228,7 +228,12 @@ def test_the_mask_detector_trains_and_runs_in_onnxruntime(dataset_dir: Path, tmp
     """mask-timm through train-detector (one step: the loop is FCOS's, whose learning is tested above; its
     own is measured in docs/posenet-research.md) into a checkpoint; exported, onnxruntime's probabilities
     equal torch's and give the same boxes."""
-    from posenet.onnx_export import MaskProbabilities, export_detector_onnx, onnx_session, run_detector_onnx
+    from posenet.export.onnx_export import (
+        MaskProbabilities,
+        export_detector_onnx,
+        onnx_session,
+        run_detector_onnx,
+    )
 
     # a low threshold, so the one-step network's faint mask still gives boxes to compare
     (tmp_path / "mask.yaml").write_text(

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
-from posenet.evaluate import SUMMARY_FIGURES, evaluate, format_table, summary_rows
+from posenet.evaluation.evaluate import SUMMARY_FIGURES, evaluate, format_table, summary_rows
 from scgen.cli import main as scgen_main
 
 # Float32 forwards round differently per batch size: absolute tolerances in each key's unit (the rotation

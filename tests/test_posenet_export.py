@@ -11,9 +11,9 @@ import torch
 from click.testing import CliRunner
 from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
+from posenet.checkpoint import load_model
 from posenet.cli import main
-from posenet.evaluate import load_model
-from posenet.onnx_export import OUTPUTS, onnx_session, run_onnx
+from posenet.export.onnx_export import OUTPUTS, onnx_session, run_onnx
 
 
 def assert_same_outputs(model: torch.nn.Module, path: Path, batches: tuple[int, ...] = (1, 3)) -> None:

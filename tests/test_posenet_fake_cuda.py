@@ -18,10 +18,10 @@ from torch._subclasses.fake_tensor import FakeTensorDeviceMismatchError, FakeTen
 from posenet.config import LossConfig
 from posenet.detection.detector import build_detector, cpu_config, detector_config_from_dict
 from posenet.detection.segmenter import mask_losses
+from posenet.evaluation.metrics import sample_errors
 from posenet.geometry import decode_pose
-from posenet.losses import PmObject, pose_losses
-from posenet.metrics import sample_errors
 from posenet.models import PRESETS, VARIANTS, create_model
+from posenet.training.losses import PmObject, pose_losses
 
 CUDA = torch.device("cuda", 0)
 

@@ -22,11 +22,12 @@ import pytest
 import torch
 from posenet_helpers import posenet_dataset
 
+from posenet.checkpoint import load_model
 from posenet.config import config_from_dict, load_config
 from posenet.data import open_split
-from posenet.evaluate import evaluate, load_model
+from posenet.evaluation.evaluate import evaluate
 from posenet.geometry import roi_translation
-from posenet.train import steps_per_epoch, train
+from posenet.training.train import steps_per_epoch, train
 
 STEPS = 1200  # at the preset's batch of 8 (4-10 minutes of training on 2 idle cores: 572 s on 2026-11-27)
 # Measured from the ImageNet Lite0 on 2 threads, a 1200-step schedule: ratio 0.56 and median 52.5 deg at

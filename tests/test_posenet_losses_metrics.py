@@ -9,17 +9,7 @@ import torch
 from scipy.spatial import cKDTree
 
 from posenet.config import LossConfig
-from posenet.geometry import ego_to_allo, mat_to_rot6d, site_encode
-from posenet.losses import (
-    PmObject,
-    coord_loss,
-    mask_loss,
-    mask_probability,
-    pm_loss,
-    pose_losses,
-    region_loss,
-)
-from posenet.metrics import (
+from posenet.evaluation.metrics import (
     ESA_THETA_Q_DEG,
     TURNED_DEG,
     add_error,
@@ -28,6 +18,15 @@ from posenet.metrics import (
     rotation_error_deg,
     sample_errors,
     summarise,
+)
+from posenet.geometry import ego_to_allo, mask_probability, mat_to_rot6d, site_encode
+from posenet.training.losses import (
+    PmObject,
+    coord_loss,
+    mask_loss,
+    pm_loss,
+    pose_losses,
+    region_loss,
 )
 
 

@@ -20,9 +20,9 @@ from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.checkpoint import load_checkpoint, save_checkpoint
 from posenet.cli import main
-from posenet.evaluate import evaluate
+from posenet.data.camera import map_box, read_camera_file, to_training_camera
+from posenet.evaluation.evaluate import evaluate
 from posenet.predict import Predictor, make_camera
-from posenet.predict.camera import map_box, read_camera_file, to_training_camera
 from scgen.generator import Generator
 from scgen.io import bop
 from scgen.scenes.spec import CameraSpec

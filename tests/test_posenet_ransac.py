@@ -14,9 +14,9 @@ from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 from posenet.cli import main
 from posenet.config import smoke_config
 from posenet.data import open_split
-from posenet.metrics import rotation_error_deg, translation_error
+from posenet.evaluation.metrics import rotation_error_deg, translation_error
 from posenet.models import ModelConfig
-from posenet.ransac import ransac_poses
+from posenet.predict.ransac import ransac_poses
 
 
 @pytest.fixture(scope="module")

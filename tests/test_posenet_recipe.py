@@ -10,7 +10,7 @@ from torch import nn
 from posenet.config import OptimConfig
 from posenet.errors import PosenetError
 from posenet.models import create_model
-from posenet.train import centralize_gradients, make_optimizer
+from posenet.training.train import centralize_gradients, make_optimizer
 
 SMALL = {"head_channels": 32, "pnp_channels": 32, "fc_dims": (64, 32)}
 

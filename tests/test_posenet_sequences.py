@@ -14,7 +14,7 @@ from posenet_helpers import tiny_pose_checkpoint
 from scipy.spatial.transform import Rotation
 
 from posenet.cli import main
-from posenet.sequences import rotation_jitter_deg, sequence_figures, translation_jitter_m
+from posenet.evaluation.sequences import rotation_jitter_deg, sequence_figures, translation_jitter_m
 from scgen.dataset.layout import read_metadata
 from scgen.io import SequenceFrame, read_sequence_frames
 from tests.conftest import SEQUENCE

@@ -17,11 +17,11 @@ import yaml
 from click.testing import CliRunner
 from posenet_helpers import posenet_dataset
 
-from posenet.budget import TimeBudget
 from posenet.cli import main
 from posenet.config import OptimConfig, load_config
 from posenet.data.layout import scan_split
-from posenet.train import lr_factor
+from posenet.training.budget import TimeBudget
+from posenet.training.train import lr_factor
 
 TINY = """\
 preset: smoke

@@ -3,7 +3,8 @@
 OUT holds config.yaml, train_log.jsonl, tb/, last.pt (rewritten every ckpt_every epochs and at the stop)
 and best.pt: the checkpoint with the highest val mean IoU so far (misses count 0), scored whenever
 last.pt is written. Without a val split (or no image in it), best.pt is not written. With `minutes`, the
-schedule is fitted while it runs to end after that much wall time, as pose training's (posenet.budget).
+schedule is fitted while it runs to end after that much wall time, as pose training's
+(posenet.training.budget).
 """
 
 from __future__ import annotations
@@ -19,7 +20,6 @@ import yaml
 from torch.utils.data import DataLoader
 from torchvision.models.detection import FCOS
 
-from posenet.budget import TimeBudget, run_budget
 from posenet.checkpoint import load_checkpoint, save_checkpoint
 from posenet.detection.detect import box_metrics, detect
 from posenet.detection.detector import (
@@ -31,7 +31,8 @@ from posenet.detection.detector import (
     visible_boxes,
 )
 from posenet.errors import PosenetError
-from posenet.train import (
+from posenet.training.budget import TimeBudget, run_budget
+from posenet.training.train import (
     LAST,
     RunLog,
     before_loader_fork,

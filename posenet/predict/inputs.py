@@ -11,8 +11,8 @@ import numpy as np
 import torch
 
 from posenet.data.boxes import read_boxes, read_misses
+from posenet.data.camera import Camera, make_camera, parse_inline, read_camera_file
 from posenet.errors import PosenetError
-from posenet.predict.camera import Camera, make_camera, parse_inline, read_camera_file
 from posenet.predict.predictor import Box, Predictor
 from posenet.predict.run import MISS
 from posenet.predict.sources import Frame, dataset_frames, read_frames, resolve_source

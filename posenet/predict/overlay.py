@@ -6,8 +6,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from posenet.data.camera import Camera, project
 from posenet.data.object_model import ObjectModel
-from posenet.predict.camera import Camera, project
 from posenet.predict.predictor import Pose
 
 POSE_COLOUR = (60, 220, 60)  # BGR: the silhouette edge

@@ -2,7 +2,7 @@
 
 `Predictor.load(ckpt, detector=...)` needs no dataset: a checkpoint carries the object (mesh, extent,
 diameter, symmetries) and the camera it was trained with. `predictor(image, camera)` warps the image into
-that camera (posenet.predict.camera), finds the box, crops it with the code training and `posenet eval`
+that camera (posenet.data.camera), finds the box, crops it with the code training and `posenet eval`
 use (posenet.data.dataset.roi_image / roi_geometry), runs the network and decodes the pose with
 posenet.geometry.decode_pose, so predict and eval cannot disagree on a convention.
 """
@@ -20,17 +20,9 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from posenet.checkpoint import load_checkpoint
+from posenet.checkpoint import load_checkpoint, model_from_state
 from posenet.config import config_from_dict
-from posenet.data.crop import roi_from_box
-from posenet.data.dataset import image_tensor, roi_geometry, roi_image
-from posenet.data.layout import image_size, scan_split
-from posenet.data.object_model import ObjectModel, load_object_model, object_from_record
-from posenet.errors import PosenetError
-from posenet.evaluate import model_from_state
-from posenet.geometry import decode_pose
-from posenet.losses import mask_probability
-from posenet.predict.camera import (
+from posenet.data.camera import (
     Camera,
     make_camera,
     map_box,
@@ -38,7 +30,13 @@ from posenet.predict.camera import (
     to_training_camera,
     training_camera,
 )
-from posenet.ransac import MIN_POINTS, correspondences
+from posenet.data.crop import roi_from_box
+from posenet.data.dataset import image_tensor, roi_geometry, roi_image
+from posenet.data.layout import image_size, scan_split
+from posenet.data.object_model import ObjectModel, load_object_model, object_from_record
+from posenet.errors import PosenetError
+from posenet.geometry import decode_pose, mask_probability
+from posenet.predict.ransac import MIN_POINTS, correspondences
 
 Box = tuple[float, float, float, float]  # [x, y, w, h]: pixels x .. x + w - 1 (posenet.data.crop)
 LOW_CONFIDENCE = 0.5  # below: the pose is flagged low_confidence
@@ -214,7 +212,11 @@ class Predictor:
 
 def onnx_network(path: Path, input_res: int) -> Network:
     """The pose network's exported graph as a Network; one made for another input size is refused."""
-    from posenet.onnx_export import input_shape, onnx_session, run_onnx  # onnxruntime: only when asked for
+    from posenet.export.onnx_export import (  # onnxruntime: only when asked for
+        input_shape,
+        onnx_session,
+        run_onnx,
+    )
 
     session = _session(path, onnx_session)
     if input_shape(session, "roi_img")[-1] != input_res:
@@ -229,7 +231,7 @@ def load_box_detector(path: Path | None, camera: Camera, device: torch.device) -
     if path is None:
         return None
     if Path(path).suffix == ".onnx":
-        from posenet.onnx_export import input_shape, onnx_session, run_detector_onnx
+        from posenet.export.onnx_export import input_shape, onnx_session, run_detector_onnx
 
         session = _session(path, onnx_session)
         size = tuple(input_shape(session, "image")[:-3:-1])

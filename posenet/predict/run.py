@@ -22,12 +22,11 @@ from typing import Any
 import cv2
 import numpy as np
 
-from posenet.evaluate import bop_results_csv
-from posenet.predict.camera import Camera
+from posenet.data.camera import Camera
 from posenet.predict.overlay import contact_sheet, draw_pose
 from posenet.predict.predictor import NO_DETECTION, Box, Predictor
 from posenet.predict.sources import Frame, load_frame
-from scgen.io import atomic_write_bytes, atomic_write_text
+from scgen.io import atomic_write_bytes, atomic_write_text, bop
 
 FORMATS = ("bop", "speedplus")
 MISS = "miss"  # a box file's entry for an image where its detector found nothing
@@ -130,7 +129,7 @@ def _write_outputs(run: PredictRun, out: Path, formats: tuple[str, ...], sheet: 
     run.files.insert(0, out / PREDICTIONS_FILE)
     posed = [r for r in run.records if r.get("R") is not None]
     if "bop" in formats:
-        atomic_write_text(out / "results.csv", bop_results_csv([_bop_record(r) for r in posed]))
+        atomic_write_text(out / "results.csv", bop.results_csv([_bop_record(r) for r in posed]))
         run.files.append(out / "results.csv")
     if "speedplus" in formats:
         rows = [
@@ -151,7 +150,7 @@ def submission_name(source: str) -> str:
 
 
 def _bop_record(r: dict[str, Any]) -> dict[str, Any]:
-    """A prediction as evaluate.bop_results_csv reads a record: a dataset image keeps its ids; any other
+    """A prediction as scgen.io.bop.results_csv reads a record: a dataset image keeps its ids; any other
     input is scene 0, its image id its place in the input order."""
     ids = {"scene_id": r.get("scene_id", 0), "im_id": r.get("im_id", r["index"]), "obj_id": r["obj_id"]}
     seconds = sum(r["time_ms"].values()) / 1000.0

@@ -15,9 +15,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from posenet.data.camera import Camera, make_camera
 from posenet.data.layout import scan_split
 from posenet.errors import PosenetError
-from posenet.predict.camera import Camera, make_camera
 from scgen.io import read_image, why_unreadable
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")

@@ -155,6 +155,22 @@ def targets_bop24(images: Iterable[tuple[int, int]]) -> list[dict[str, int]]:
     return [{"im_id": im_id, "scene_id": scene_id} for scene_id, im_id in images]
 
 
+def results_csv(records: list[dict[str, Any]]) -> str:
+    """Pose estimates as a BOP19 results file (what bop_toolkit's evaluation reads):
+    `scene_id,im_id,obj_id,score,R,t,time`, R row-major and t in
+    mm, space-separated; time = the image's seconds (the same for each of its estimates); score the
+    record's `score` (posenet predict's pose confidence), else 1.0."""
+    lines = ["scene_id,im_id,obj_id,score,R,t,time"]
+    for r in (
+        r for r in records if r["R"] is not None
+    ):  # no estimate (missed, PnP failed): BOP counts it wrong
+        R = " ".join(repr(float(v)) for v in r["R"])
+        t = " ".join(repr(float(v) * MM_PER_M) for v in r["t"])
+        score = float(r.get("score", 1.0))
+        lines.append(f"{r['scene_id']},{r['im_id']},{r['obj_id']},{score!r},{R},{t},{r['time_s']!r}")
+    return "\n".join(lines) + "\n"
+
+
 def ply_vertex_properties(path: Path) -> list[str]:
     """Names of a PLY file's vertex properties, read from its header as bop_toolkit's inout.load_ply does
     (it finds normals by nx, ny, nz and colours by red, green, blue)."""

@@ -14,7 +14,7 @@ import torch
 from torch import Tensor
 
 from posenet.data.crop import roi_pixel_centres
-from posenet.losses import mask_probability
+from posenet.geometry import mask_probability
 
 PNP_METHODS = ("patch", "ransac")
 PNP_LABELS = {"patch": "Patch-PnP", "ransac": "PnP-RANSAC"}

@@ -28,17 +28,17 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 import posenet
-from posenet.amp import Precision
-from posenet.budget import PROBE_STEPS, TimeBudget, run_budget
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
 from posenet.config import OptimConfig, TrainConfig, config_from_dict
 from posenet.data import EpochSampler, PoseDataset, open_split
+from posenet.data.camera import training_camera
 from posenet.data.layout import scan_split
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
-from posenet.losses import LOSS_TERMS, PmObject, pose_losses
 from posenet.models import PoseNet, create_model
-from posenet.predict.camera import training_camera
+from posenet.training.amp import Precision
+from posenet.training.budget import PROBE_STEPS, TimeBudget, run_budget
+from posenet.training.losses import LOSS_TERMS, PmObject, pose_losses
 from scgen.io import ScgenError, atomic_write_text, check_output, first_missing
 
 LOG_FILE = "train_log.jsonl"
@@ -234,7 +234,8 @@ def train(
     minutes: float | None = None,
 ) -> Path:
     """Train on `data`'s train split into `out`; returns the path of the last checkpoint. With `minutes`,
-    the schedule is fitted to end when that much wall time has passed since this call (posenet.budget)."""
+    the schedule is fitted to end when that much wall time has passed since this call
+    (posenet.training.budget)."""
     budget = run_budget(minutes, cfg.optim.anneal_point, resume, max_steps)
     rank, world, device = _init_distributed()
     made = first_missing(out)  # removed if the run fails before its first checkpoint

@@ -3,7 +3,7 @@
 `evaluate` runs the split in batches and returns the summary and one record per instance; the latency
 is measured apart, at batch 1, as `posenet bench` measures it. `by_factor` gives the paper's Table 5:
 ADD@0.02 m per (factor, group) over fixed sample lists, one column per variant, checkpoints of the same
-variant averaged. `bop_results_csv` writes the records as a BOP19 results file.
+variant averaged. `scgen.io.bop.results_csv` writes the records as a BOP19 results file.
 """
 
 from __future__ import annotations
@@ -22,18 +22,17 @@ import torch
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
-from posenet.bench import dummy_inputs, measure_latency_ms
-from posenet.checkpoint import load_checkpoint
+from posenet.checkpoint import load_model
 from posenet.config import config_from_dict
 from posenet.data import open_split
 from posenet.data.boxes import box_source, read_misses
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
+from posenet.evaluation.metrics import TURNED_DEG, headline_add, sample_errors, summarise
+from posenet.export.bench import dummy_inputs, measure_latency_ms
 from posenet.geometry import decode_pose
-from posenet.metrics import TURNED_DEG, headline_add, sample_errors, summarise
-from posenet.models import PoseNet, create_model
-from posenet.ransac import PNP_LABELS, ransac_poses
-from scgen.io import bop
+from posenet.models import PoseNet
+from posenet.predict.ransac import PNP_LABELS, ransac_poses
 
 BATCH_SIZE = 32
 LATENCY_WARMUP = 5  # untimed batch-1 forwards (allocator, cuDNN autotuning)
@@ -80,22 +79,6 @@ class EvalResult:
         return summarise(errors, self.diameter, self.summary["symmetric"])
 
 
-def load_model(ckpt: Path, device: torch.device) -> tuple[PoseNet, dict[str, Any]]:
-    """The network of a checkpoint, in eval mode on `device`, and the checkpoint itself."""
-    state = load_checkpoint(ckpt, kind="pose")
-    return model_from_state(state, ckpt, device), state
-
-
-def model_from_state(state: dict[str, Any], ckpt: Path, device: torch.device) -> PoseNet:
-    """The network of an already loaded pose checkpoint `state` (read from `ckpt`), in eval mode."""
-    model = create_model(**state["model_config"])
-    try:
-        model.load_state_dict(state["model"])
-    except RuntimeError as exc:
-        raise PosenetError(f"checkpoint {ckpt} does not match its own model configuration") from exc
-    return model.to(device).eval()
-
-
 Predictions = tuple[list[dict[str, Any]], dict[str, list[float]]]  # records, and each error's list
 
 
@@ -108,7 +91,8 @@ def predict(
     methods: Sequence[str] = ("patch",),
     mask_type: str = "bce",
 ) -> dict[str, Predictions]:
-    """Per PnP method (`patch`: the network's own pose; `ransac`: posenet.ransac on its correspondences,
+    """Per PnP method (`patch`: the network's own pose; `ransac`: posenet.predict.ransac on its
+    correspondences,
     reading its mask channel as `mask_type` trained it), records in loader order (scene_id, im_id, obj_id,
     R row-major, t in metres, time_s, each error of metrics.sample_errors) and each error's list over
     them, for metrics.summarise. A RoI PnP-RANSAC cannot solve is a failure: no pose, infinite errors,
@@ -207,7 +191,8 @@ def evaluate(
     `pnp` (patch: the network's Patch-PnP; ransac: PnP-RANSAC on its correspondences).
 
     The batch size changes neither the records (beyond float rounding and their time_s) nor the summary;
-    `latency_ms` is the batch-1 network forward, timed by `posenet.bench.measure_latency_ms` on the same
+    `latency_ms` is the batch-1 network forward, timed by `posenet.export.bench.measure_latency_ms` on the
+    same
     device.
     """
     return evaluate_pnp(data, ckpt, (pnp,), split, boxes, image_ids, workers, batch_size, obj_id)[pnp]
@@ -253,21 +238,6 @@ def evaluate_pnp(
         variant = state["model_config"]["variant"]
         results[method] = EvalResult(variant, summary, records, errors, dataset.obj.diameter)
     return results
-
-
-def bop_results_csv(records: list[dict[str, Any]]) -> str:
-    """The records as a BOP19 results file: `scene_id,im_id,obj_id,score,R,t,time`, R row-major and t in
-    mm, space-separated; time = the image's seconds (the same for each of its estimates); score the
-    record's `score` (posenet predict's pose confidence), else 1.0."""
-    lines = ["scene_id,im_id,obj_id,score,R,t,time"]
-    for r in (
-        r for r in records if r["R"] is not None
-    ):  # no estimate (missed, PnP failed): BOP counts it wrong
-        R = " ".join(repr(float(v)) for v in r["R"])
-        t = " ".join(repr(float(v) * bop.MM_PER_M) for v in r["t"])
-        score = float(r.get("score", 1.0))
-        lines.append(f"{r['scene_id']},{r['im_id']},{r['obj_id']},{score!r},{R},{t},{r['time_s']!r}")
-    return "\n".join(lines) + "\n"
 
 
 def read_groups(path: Path) -> tuple[str | None, dict[str, dict[str, list[int]]]]:

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from posenet.data.layout import scan_split
-from posenet.evaluate import EvalResult, format_table
+from posenet.evaluation.evaluate import EvalResult, format_table
 from scgen.io import SequenceFrame, read_sequence_frames
 
 Pose = tuple[np.ndarray, np.ndarray]  # (R (3, 3), t (3,) in metres)

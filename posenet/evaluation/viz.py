@@ -11,13 +11,13 @@ import torch
 import trimesh
 from tqdm import tqdm
 
-from posenet.checkpoint import load_checkpoint
+from posenet.checkpoint import load_checkpoint, load_model
 from posenet.config import config_from_dict
 from posenet.data import open_split
 from posenet.data.layout import Instance, scan_split
 from posenet.errors import PosenetError
-from posenet.evaluate import evaluate, load_model
-from posenet.featviz import model_feature_response
+from posenet.evaluation.evaluate import evaluate
+from posenet.evaluation.featviz import model_feature_response
 from posenet.predict.overlay import outline
 from scgen.io import bop
 

@@ -13,9 +13,9 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from posenet.amp import full_precision
 from posenet.config import LossConfig
 from posenet.geometry import decode_pose, symmetric_poses
+from posenet.training.amp import full_precision
 
 LOSS_TERMS = ("coord", "mask", "region", "pm", "cent", "z")  # paper eq. 7
 
@@ -31,12 +31,6 @@ def mask_loss(mask: Tensor, target: Tensor, kind: str) -> Tensor:
     if kind == "bce":
         return F.binary_cross_entropy_with_logits(mask, target)
     return (mask - target).abs().mean()
-
-
-def mask_probability(mask: Tensor, kind: str) -> Tensor:
-    """The visible-mask probability that a mask channel trained with loss `kind` stands for: the sigmoid
-    of a logit ('bce'), the raw value clipped to [0, 1] ('l1')."""
-    return mask.sigmoid() if kind == "bce" else mask.clamp(0.0, 1.0)
 
 
 def region_loss(logits: Tensor, labels: Tensor, visible: Tensor) -> Tensor:
@@ -56,7 +50,7 @@ def pm_loss(R_pred: Tensor, R_gt: Tensor, points: Tensor) -> Tensor:
 
 
 class PmObject(NamedTuple):
-    """The object as the point-matching loss sees it (posenet.train.pm_loss_points builds it)."""
+    """The object as the point-matching loss sees it (posenet.training.train.pm_loss_points builds it)."""
 
     points: Tensor  # (N, 3) model points scaled by 1 / max(extent), so that the loss is unit-free
     symmetries: Tensor  # (K, 4, 4) the object's symmetry transforms, identity first; their rotations enter

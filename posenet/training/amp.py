@@ -2,7 +2,7 @@
 
 `optim.amp` is `auto`, `off`, `bf16` or `fp16`. `auto` (the paper preset) is bf16 on a CUDA GPU that
 supports it and float32 elsewhere; the CPU preset says `off`. Autocast covers the forward pass and the
-losses; pose decoding and the point-matching loss run in float32 (`posenet.losses.pose_losses`). fp16
+losses; pose decoding and the point-matching loss run in float32 (`posenet.training.losses.pose_losses`). fp16
 scales the loss with torch's GradScaler, so small gradients do not flush to zero.
 """
 
@@ -12,7 +12,6 @@ import contextlib
 
 import torch
 
-AMP_MODES = ("auto", "off", "bf16", "fp16")
 DTYPES = {"bf16": torch.bfloat16, "fp16": torch.float16}
 
 

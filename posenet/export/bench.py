@@ -100,7 +100,11 @@ def onnx_latency_ms(
 ) -> float:
     """`measure_latency_ms` of the model exported to ONNX and run by onnxruntime on the CPU, with torch's
     intra-op thread count."""
-    from posenet.onnx_export import export_onnx, onnx_session, run_onnx  # onnxscript's import costs ~0.6 s
+    from posenet.export.onnx_export import (  # onnxscript's import costs ~0.6 s
+        export_onnx,
+        onnx_session,
+        run_onnx,
+    )
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "model.onnx"
