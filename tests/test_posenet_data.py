@@ -12,7 +12,7 @@ import pytest
 import torch
 import trimesh
 from click.testing import CliRunner
-from posenet_helpers import occluded_dataset, posenet_dataset
+from posenet_helpers import occluded_dataset, posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
 from posenet.config import DataConfig, smoke_config
@@ -225,3 +225,29 @@ def test_train_images_takes_nested_subsets_of_the_train_split(dataset_dir: Path)
     assert len(test) == len(open_split(dataset_dir, "test", DataConfig(), model, train=False))
     with pytest.raises(PosenetError, match="data.train_images 999 exceeds the"):
         open_split(dataset_dir, "train", DataConfig(train_images=999), model, train=True)
+
+
+def test_a_truncated_image_is_refused_alike_by_train_train_detector_eval_and_boxes(
+    dataset_dir: Path, tmp_path: Path, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """One train and one test image cut to 200 bytes, as a broken copy leaves them: every command that
+    reads the split refuses it before any work, in one line naming the file, and writes nothing."""
+    ckpt = tiny_pose_checkpoint(dataset_dir, tmp_path_factory, "whole")
+    broken = tmp_path / "broken"
+    shutil.copytree(dataset_dir, broken)
+    cut = {}
+    for split in ("train", "test"):
+        cut[split] = sorted(broken.glob(f"{split}/*/rgb/*"))[0]
+        cut[split].write_bytes(cut[split].read_bytes()[:200])
+    runs = {
+        "train": ["train", "--data", broken, "--out", tmp_path / "run", "--max-steps", 1],
+        "train-detector": ["train-detector", "--data", broken, "--out", tmp_path / "det", "--max-steps", 1],
+        "eval": ["eval", "--data", broken, "--ckpt", ckpt, "--json", tmp_path / "eval.json"],
+        "boxes": ["boxes", "--data", broken, "--out", tmp_path / "boxes.json"],
+    }
+    for name, args in runs.items():
+        res = CliRunner().invoke(main, [str(a) for a in args])
+        split = "train" if name.startswith("train") else "test"
+        assert res.exit_code != 0 and res.output.count("\n") == 1, (name, res.output)
+        assert res.output.startswith("Error: 1 of the ") and f"{cut[split]}: truncated" in res.output, name
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken"]

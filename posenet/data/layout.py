@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from posenet.data.io import image_fault
 from posenet.errors import PosenetError
 from scgen.io import NOT_A_FOLDER, bop, not_a_dataset
 
@@ -32,6 +33,7 @@ class Instance:
     mask_visib: Path
     xyz: Path
     K: np.ndarray
+    dist: np.ndarray  # OpenCV's k1, k2, p1, p2, k3 (cam_dist; zeros: a pinhole camera)
     R: np.ndarray
     t: np.ndarray
     bbox_obj: tuple[int, int, int, int]
@@ -62,9 +64,13 @@ def _has_gt(scene: Path) -> bool:
     return bop.scene_file(scene, "scene_gt").is_file()
 
 
-def scan_split(root: Path, split: str, obj_id: int) -> list[Instance]:
+def scan_split(
+    root: Path, split: str, obj_id: int, lens: bool = False, check_images: bool = True
+) -> list[Instance]:
     """Every instance of object `obj_id` in `root/split/*/`, sorted by (scene_id, im_id, inst); the
-    instances of other objects in the same images are skipped, their files never opened."""
+    instances of other objects in the same images are skipped, their files never opened. An image taken
+    through a lens is refused unless `lens` (posenet's crops and SITE are pinhole; predict warps lenses
+    away). With `check_images`, every image the instances name must be whole (check_whole)."""
     size = image_size(root)
     split_dir = root / split
     scenes = sorted(p for p in split_dir.glob("[0-9]*") if _has_gt(p))
@@ -77,11 +83,33 @@ def scan_split(root: Path, split: str, obj_id: int) -> list[Instance]:
         raise PosenetError(f"{root} has no split '{split}' (splits found: {', '.join(found) or 'none'})")
     out: list[Instance] = []
     for scene in scenes:
-        out.extend(_scan_scene(scene, split, obj_id, size))
+        out.extend(_scan_scene(scene, split, obj_id, size, lens))
+    if check_images:
+        check_whole(out, f"split '{split}' of {root}")
     return out
 
 
-def _scan_scene(scene: Path, split: str, obj_id: int, size: tuple[int, int]) -> list[Instance]:
+def check_whole(instances: list[Instance], where: str) -> None:
+    """Refuse, before any work, images that are not whole (posenet.data.io.image_fault: their first and
+    last bytes, under 0.1 ms an image, 4-5 s for 50,000). train, train-detector, eval and boxes all index
+    their split through scan_split, so they refuse the same datasets; skipping instead would let eval score
+    another image set than a run on the whole folder, and a broken copy rarely breaks one file only."""
+    paths = sorted({i.rgb for i in instances})
+    faults = [(p, why) for p in paths if (why := image_fault(p)) is not None]
+    if faults:
+        path, why = faults[0]
+        record = path.parent.parent / "records" / f"{path.stem}.json"
+        redo = (
+            f"delete {record} and run its scgen render again, which renders the missing sample"
+            if record.is_file()
+            else "replace it, or delete it (its sample is then skipped, as one still being written)"
+        )
+        raise PosenetError(
+            f"{len(faults)} of the {len(paths)} images of {where} cannot be read, e.g. {path}: {why}; {redo}"
+        )
+
+
+def _scan_scene(scene: Path, split: str, obj_id: int, size: tuple[int, int], lens: bool) -> list[Instance]:
     gt, cams, infos = (bop.read_json(bop.scene_file(scene, name)) for name in bop.SCENE_FILES)
     out: list[Instance] = []
     try:
@@ -92,7 +120,8 @@ def _scan_scene(scene: Path, split: str, obj_id: int, size: tuple[int, int]) -> 
             )
             if rgb is None:
                 continue  # a sample still being written: nothing to train or test on yet
-            if any(cams[im_key].get("cam_dist", ())):
+            dist = np.asarray(bop.camera_dist(cams[im_key]), np.float64)
+            if np.any(dist) and not lens:
                 raise PosenetError(
                     f"{scene}: image {im_id} was taken through a lens with distortion (cam_dist "
                     f"{cams[im_key]['cam_dist']}); posenet's crops and SITE assume a pinhole camera: render "
@@ -101,7 +130,7 @@ def _scan_scene(scene: Path, split: str, obj_id: int, size: tuple[int, int]) -> 
             K = bop.camera_K(cams[im_key])
             for inst, (ann, info) in enumerate(zip(gt[im_key], infos[im_key], strict=True)):
                 if int(ann["obj_id"]) == obj_id:
-                    out.append(_instance(scene, split, im_id, inst, rgb, K, ann, info, size))
+                    out.append(_instance(scene, split, im_id, inst, rgb, (K, dist), ann, info, size))
     except (KeyError, ValueError, TypeError) as exc:
         raise PosenetError(f"{scene}: malformed BOP annotation ({type(exc).__name__}: {exc})") from exc
     return out
@@ -113,7 +142,7 @@ def _instance(
     im_id: int,
     inst: int,
     rgb: Path,
-    K: np.ndarray,
+    camera: tuple[np.ndarray, np.ndarray],
     ann: dict,
     info: dict,
     size: tuple,
@@ -129,7 +158,8 @@ def _instance(
         mask=bop.mask_path(scene, im_id, inst),
         mask_visib=bop.mask_path(scene, im_id, inst, visib=True),
         xyz=bop.xyz_path(scene, im_id, inst),
-        K=K,
+        K=camera[0],
+        dist=camera[1],
         R=R,
         t=t,
         bbox_obj=bop.box_pixels(info["bbox_obj"]),
