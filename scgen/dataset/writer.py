@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from scgen.annotate import Annotation
-from scgen.annotate.annotate import full_projection
+from scgen.annotate.record import exposure_ev, gt_info_entry, metadata_row
 from scgen.dataset.layout import CHUNK, OBJ_ID, RGB_FORMATS, Layout, dumps
 from scgen.errors import ScgenError
 from scgen.io import bop
@@ -32,13 +32,8 @@ from scgen.io.buffers import Buffers, CameraRecord
 from scgen.io.exr import encode_xyz_exr
 from scgen.scenes.attitude import CONE_COLUMNS
 from scgen.scenes.config import distance_range_m
-from scgen.scenes.factors import FLARE_LABELS, noise_group, occluder_config, spec_key, viewpoint_cell
-from scgen.scenes.finish import finish_group
-from scgen.scenes.geometry import matrix_to_quat
-from scgen.scenes.imaging import IDEAL_IMAGING, mid_grey_snr
 from scgen.scenes.model import TargetModel
-from scgen.scenes.sky import background_holds, sky_labels
-from scgen.scenes.spec import SEQUENCE_COLUMNS, CameraSpec, SceneSpec
+from scgen.scenes.spec import SEQUENCE_COLUMNS, SceneSpec
 
 METADATA_COLUMNS = (
     "sample_id", "split", "scene_id", "im_id", "illumination", "sun_irradiance_w_m2", "exposure_ev",
@@ -167,85 +162,22 @@ def write_sample(
     return record
 
 
-def gt_info_entry(camera: CameraSpec, ann: Annotation, vertices_cam: np.ndarray, faces: np.ndarray,
-                  depth: np.ndarray, xyz_box: list[int] | None) -> dict[str, Any]:  # fmt: skip
-    """The scene_gt_info.json entry of a rendered sample: the whole projection measured by
-    `full_projection`, px_count_valid = silhouette pixels inside the image with a depth value."""
-    px_count_all, bbox_obj = full_projection(ann.mask, camera, vertices_cam, faces)
-    return bop.gt_info_entry(
-        px_count_all, bbox_obj, ann.mask_visib, int((ann.mask & (depth > 0)).sum()), xyz_box
-    )
-
-
 def build_record(
     spec: SceneSpec, ann: Annotation, split: str, gt_info: dict[str, Any], depth_scale: float,
     camera: CameraRecord | None = None,
 ) -> dict[str, Any]:  # fmt: skip
     """Everything finalize needs for the BOP JSON files and the metadata row of one sample; `camera`: what
     the camera stage decided (None: the base exposure, no flare)."""
-    R, t = spec.target.R_mat, spec.target.t_vec
-    imaging = spec.imaging or IDEAL_IMAGING
-    exposure_ev = camera.exposure_ev if camera else spec.camera.exposure_ev
-    snr = mid_grey_snr(imaging.camera, imaging.gain)
-    q = matrix_to_quat(R)
-    sun = spec.sun.direction
-    meta = {
-        "sample_id": spec.index,
-        "split": split,
-        "scene_id": spec.sequence.sequence if spec.sequence else spec.index // CHUNK,
-        "im_id": spec.index,
-        "illumination": spec.sun.level,
-        "sun_irradiance_w_m2": spec.sun.irradiance,
-        "exposure_ev": exposure_ev,
-        "sun_x": sun[0],
-        "sun_y": sun[1],
-        "sun_z": sun[2],
-        "shadow": ann.shadow_label,
-        "shadow_fraction": ann.shadow_fraction,
-        "shadow_caster": int(spec.shadow_caster),
-        "occlusion": ann.occlusion_group,
-        "r_occ": ann.r_occ,
-        "visib_fract": ann.visib_fract,
-        "px_count_all": ann.px_count_all,
-        "px_count_visib": ann.px_count_visib,
-        "requested_occlusion": spec.requested_occlusion,
-        "occluder_config": occluder_config(spec),
-        "n_occluders": len(spec.occluders),
-        "background": spec.background.kind,
-        "background_holds": background_holds(spec.background.kind, spec.background.params),
-        "distance_m": spec.distance_m,
-        "tx": t[0],
-        "ty": t[1],
-        "tz": t[2],
-        "qw": q[0],
-        "qx": q[1],
-        "qy": q[2],
-        "qz": q[3],
-        "viewpoint_cell": viewpoint_cell(R, t),
-        "combination_key": spec_key(spec),
-        "camera": imaging.camera.preset,
-        "noise": noise_group(snr),
-        "noise_gain": imaging.gain,
-        "mid_grey_snr": "" if snr is None else snr,
-        "psf_fwhm_px": imaging.psf_fwhm_px,
-        "motion_blur_px": imaging.motion_blur_px,
-        "motion_blur_deg": imaging.motion_blur_deg,
-        "vignetting": imaging.vignetting,
-        "chromatic_px": imaging.chromatic_px,
-        "flare": FLARE_LABELS[int(bool(camera and camera.flare))],
-        "saturated": camera.saturated if camera else 0.0,
-        "finish": finish_group(spec.finish),
-        **sky_labels(spec.background.params),
-        **(spec.cone.labels() if spec.cone else {}),
-        **(spec.sequence.labels() if spec.sequence else {}),
-    }
-    scene_camera = {"cam_K": list(spec.camera.K), "depth_scale": depth_scale, "exposure_ev": exposure_ev}
+    scene_id = spec.sequence.sequence if spec.sequence else spec.index // CHUNK
+    meta = metadata_row(spec, ann, split, scene_id, camera)
+    exposure = exposure_ev(spec, camera)
+    scene_camera = {"cam_K": list(spec.camera.K), "depth_scale": depth_scale, "exposure_ev": exposure}
     if not spec.camera.pinhole:
         scene_camera["cam_dist"] = list(spec.camera.dist)
     return {
         "sample_id": spec.index,
         "split": split,
-        "scene_gt": [bop.gt_entry(R, t, OBJ_ID)],
+        "scene_gt": [bop.gt_entry(spec.target.R_mat, spec.target.t_vec, OBJ_ID)],
         "scene_camera": scene_camera,
         "scene_gt_info": [gt_info],
         "metadata": meta,
