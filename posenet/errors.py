@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import re
 
+from clishell.errors import UserError
+
 # how torch's DataLoader re-raises an exception met in a loader process: the type, then the worker's
 # traceback as text, whose last line is the original "module.Type: message"
 _LOADER_WRAPPED = re.compile(r"Caught PosenetError in DataLoader worker process \d+\.\n")
 
 
-class PosenetError(Exception):
+class PosenetError(UserError):
     """A problem with the user's input: dataset folder, box file, config, checkpoint, a sample's file.
 
     Met in a DataLoader process, it comes back as a PosenetError whose text is that process's whole

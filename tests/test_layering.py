@@ -39,7 +39,7 @@ POSENET_FLOORS = (
     ("posenet.export",),
     ("posenet.predict",),
     ("posenet.evaluation",),
-    ("posenet.cli", "posenet.console"),
+    ("posenet.cli", "posenet.console", "posenet.doctor"),
 )
 # the package root's lazy facade (posenet.API): the Python API's front door, loaded on first use only
 POSENET_FACADE = {
