@@ -102,7 +102,7 @@ def _preview_sequence(sequence: int, out: Path, backend: str, seed: int, model_p
     from scgen.generator import Generator
     from scgen.io.output_path import check_output
     from scgen.preview import build_sequence_preview, contact_sheet, save_gif, save_png
-    from scgen.scenes.sequence import is_sequence
+    from scgen.scenes.motion.sequence import is_sequence
 
     if sequence < 0:
         raise ScgenError(f"--sequence must be a sequence id >= 0, got {sequence}")

@@ -18,8 +18,8 @@ from scgen.annotate import Annotation, annotate
 from scgen.io.buffers import Buffers
 from scgen.scenes import SceneSpec, TargetShape, load_config, sample_scene
 from scgen.scenes.model import TargetModel, load_target
-from scgen.scenes.sequence import is_sequence, sample_sequence
-from scgen.scenes.tumble import MassProperties, mass_properties
+from scgen.scenes.motion.sequence import is_sequence, sample_sequence
+from scgen.scenes.motion.tumble import MassProperties, mass_properties
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,7 @@
-"""The physics of rendezvous sequences (scgen.scenes.orbit, scgen.scenes.tumble), checked against the
-equations they solve: HCW relative motion, the profiles' defining properties, the sun and the Earth's
-shadow, and torque-free attitude dynamics (conservation laws, the stability of principal-axis spins).
+"""The physics of rendezvous sequences (scgen.scenes.motion.orbit, scgen.scenes.motion.tumble), checked
+against the equations they solve: HCW relative motion, the profiles' defining properties, the sun and the
+Earth's shadow, and torque-free attitude dynamics (conservation laws, the stability of principal-axis
+spins).
 No renderer; the whole file runs in a few seconds."""
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from scipy.integrate import solve_ivp
 
 from scgen.errors import ScgenError
 from scgen.scenes.model import load_target
-from scgen.scenes.orbit import (
+from scgen.scenes.motion.orbit import (
     PROFILES,
     R_EARTH,
     FlyBy,
@@ -31,7 +32,7 @@ from scgen.scenes.orbit import (
     lvlh_to_inertial,
     sun_direction_lvlh,
 )
-from scgen.scenes.tumble import (
+from scgen.scenes.motion.tumble import (
     ATTITUDE_MODES,
     AttitudeMotion,
     attitude_track,

@@ -19,8 +19,8 @@ from scgen.cli import main
 from scgen.dataset.validate import check_sequences
 from scgen.errors import ScgenError
 from scgen.scenes import load_config
-from scgen.scenes.orbit import PROFILES
-from scgen.scenes.tumble import ATTITUDE_MODES
+from scgen.scenes.motion.orbit import PROFILES
+from scgen.scenes.motion.tumble import ATTITUDE_MODES
 
 
 def sequence_generator(**sequence: Any) -> Generator:

@@ -34,7 +34,7 @@ from scgen.render.conventions import check_quality
 from scgen.run.executors import run_local, run_ray
 from scgen.run.worker import Done, Task, WorkerSettings
 from scgen.scenes.factors import spec_key
-from scgen.scenes.sequence import is_sequence
+from scgen.scenes.motion.sequence import is_sequence
 from scgen.scenes.spec import SceneSpec
 
 

@@ -22,7 +22,7 @@ from scgen.scenes.camera_config import DEFAULT_CAMERA, camera_preset, check_came
 from scgen.scenes.checks import check_prob, check_range, is_number
 from scgen.scenes.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
 from scgen.scenes.finish import FINISH_MODES
-from scgen.scenes.sequence import check_sequence, merge_sequence
+from scgen.scenes.motion.sequence import check_sequence, merge_sequence
 from scgen.scenes.sky import BODIES
 from scgen.scenes.sky_data import BLUE_MARBLE, HIPPARCOS, resolve_source
 from scgen.scenes.spec import CameraSpec

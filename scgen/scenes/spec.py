@@ -177,7 +177,7 @@ SEQUENCE_COLUMNS = (
 
 @dataclass(frozen=True)
 class SequenceFrame:
-    """Where a frame sits in its rendezvous sequence (scgen.scenes.sequence) and the motion there.
+    """Where a frame sits in its rendezvous sequence (scgen.scenes.motion.sequence) and the motion there.
 
     `velocity`: d t / dt, the rate of the labelled translation t (m/s, model-frame metres, camera axes);
     `angular_velocity`: the target's angular velocity relative to the camera (rad/s, camera axes), so
@@ -221,7 +221,7 @@ class SceneSpec:
     imaging: ImagingSpec | None = None  # None: the ideal camera (no stage draws)
     finish: dict[str, dict[str, Any]] = field(default_factory=dict)  # scgen.scenes.finish; {}: nominal
     cone: ConeDraw | None = None  # a cone attitude's place in its corridor (scgen.scenes.attitude)
-    sequence: SequenceFrame | None = None  # a rendezvous sequence's frame (scgen.scenes.sequence)
+    sequence: SequenceFrame | None = None  # a rendezvous sequence's frame (scgen.scenes.motion.sequence)
 
     @property
     def occluders(self) -> tuple[PropSpec, ...]:

@@ -1,12 +1,12 @@
 """Rendezvous sequences: the config's `[sequence]` table, and sequence s of a seed as SceneSpecs, one a frame.
 
 A sequence draws, each from its own stream (`sequence_rng(seed, s, part)`), an orbit, a relative-motion
-profile and an attitude motion (scgen.scenes.orbit, scgen.scenes.tumble), a sun fixed in inertial space,
-a camera pointing and a camera; frame k at t_k = k dt is then an ordinary SceneSpec, with the camera at the
-chaser (its frame the scene's world frame, as for every sample), so the render, camera, annotation and
-writer paths are those of an independent sample. Every frame is computed from the whole sequence at once
-(the tumble integrated over the whole span, the pointing carried from frame to frame), so frame k is the
-same whatever frames are asked for. Pure numpy/scipy; docs/sequences.md gives the equations.
+profile and an attitude motion (scgen.scenes.motion.orbit, scgen.scenes.motion.tumble), a sun fixed in
+inertial space, a camera pointing and a camera; frame k at t_k = k dt is then an ordinary SceneSpec, with the
+camera at the chaser (its frame the scene's world frame, as for every sample), so the render, camera,
+annotation and writer paths are those of an independent sample. Every frame is computed from the whole
+sequence at once (the tumble integrated over the whole span, the pointing carried from frame to frame), so
+frame k is the same whatever frames are asked for. Pure numpy/scipy; docs/sequences.md gives the equations.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from scgen.scenes.camera_config import CameraSettings
 from scgen.scenes.checks import check_range, is_number
 from scgen.scenes.finish import sample_finish
 from scgen.scenes.imaging import sample_imaging
-from scgen.scenes.orbit import (
+from scgen.scenes.motion.orbit import (
     NADIR_LVLH,
     PROFILES,
     Orbit,
@@ -36,11 +36,11 @@ from scgen.scenes.orbit import (
     lvlh_to_inertial,
     sun_direction_lvlh,
 )
+from scgen.scenes.motion.tumble import ATTITUDE_MODES, MassProperties, attitude_track, draw_attitude
 from scgen.scenes.rng import sequence_rng
 from scgen.scenes.silhouette import TargetShape
 from scgen.scenes.sky import celestial_frame, sky_background
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, SceneSpec, SequenceFrame, SunSpec
-from scgen.scenes.tumble import ATTITUDE_MODES, MassProperties, attitude_track, draw_attitude
 
 EARTH_ROTATION_RAD_S = 7.2921159e-5  # the Earth's sidereal spin rate (IERS), turning its map under the orbit
 POINTING_MODES = ("target", "fixed")
@@ -55,7 +55,7 @@ DEFAULT_SEQUENCE: dict[str, Any] = {
     "spacecraft_diameter_m": 3.0,  # the real target's diameter (m): profile metres x model diameter / this
     "altitude_km": [400.0, 800.0],  # circular orbit, altitude uniform over this range
     "max_beta_deg": 90.0,  # the sun's elevation over the orbit plane, uniform over the band |beta| <= this
-    "profile_probs": {name: 1.0 / len(PROFILES) for name in PROFILES},  # scgen.scenes.orbit.PROFILES
+    "profile_probs": {name: 1.0 / len(PROFILES) for name in PROFILES},  # scgen.scenes.motion.orbit.PROFILES
     "profiles": {},  # per profile, its ranges overriding DEFAULT_PROFILE_RANGES[profile]
     "attitude_probs": {mode: 1.0 / len(ATTITUDE_MODES) for mode in ATTITUDE_MODES},
     "rate_deg": [0.5, 5.0],  # deg/s, spin and tumble rates
@@ -180,9 +180,9 @@ class SequenceDraw:
     the pointing (roll at frame 0; pointing error as a rotation of the camera, camera axes) and the sky."""
 
     altitude_m: float
-    profile: Any  # an scgen.scenes.orbit profile
-    attitude: Any  # scgen.scenes.tumble.AttitudeMotion
-    sun: Any  # scgen.scenes.orbit.Sun
+    profile: Any  # an scgen.scenes.motion.orbit profile
+    attitude: Any  # scgen.scenes.motion.tumble.AttitudeMotion
+    sun: Any  # scgen.scenes.motion.orbit.Sun
     roll_rad: float
     error: np.ndarray  # 3x3, camera (pointing at the target) -> camera (as it points)
     sky_longitude: float  # the sun's ecliptic longitude (a date) and the sky's roll about it (rad)

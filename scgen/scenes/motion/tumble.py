@@ -2,8 +2,8 @@
 torque-free tumble integrated from Euler's equations with the inertia tensor of its mesh.
 
 Frames: the body frame B is the model frame (its axes; scgen.scenes.model), rotating about the centre of
-mass; LVLH and the inertial frame I are those of scgen.scenes.orbit (LVLH turns in I about z at the mean
-motion n). Rotations map vectors: R_IB v_B = v_I, R_LB v_B = v_L, with R_LB = R_IL(t)^T R_IB.
+mass; LVLH and the inertial frame I are those of scgen.scenes.motion.orbit (LVLH turns in I about z at the
+mean motion n). Rotations map vectors: R_IB v_B = v_I, R_LB v_B = v_L, with R_LB = R_IL(t)^T R_IB.
 Angular velocities are the body's relative to I, in body axes (rad/s). The body turns about its centre
 of mass c (model frame, `MassProperties.centre_of_mass`): when the chaser sees the centre of mass at r,
 the model origin sits at r - R c.
@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from scgen.errors import ScgenError
 from scgen.scenes.geometry import random_rotation, random_unit_vector
-from scgen.scenes.orbit import lvlh_to_inertial
+from scgen.scenes.motion.orbit import lvlh_to_inertial
 
 ATTITUDE_MODES = ("lvlh_hold", "inertial", "spin", "tumble")
 SPIN_AXES = ("minor", "intermediate", "major")  # principal axes by ascending moment
