@@ -27,7 +27,7 @@ from scgen.errors import ScgenError
 from scgen.generator import Generator
 from scgen.io.atomic import atomic_write_text, remove_stale_temporaries
 from scgen.io.bop import read_json
-from scgen.io.output_path import check_output
+from scgen.io.output_path import check_output, make_output_folder, writing
 from scgen.io.parent_watch import spawn_pool
 from scgen.render.base import check_backend, renderer_threads
 from scgen.render.conventions import check_quality
@@ -174,7 +174,7 @@ def write_static_files(layout: Layout, generator: Generator, farthest_m: float |
     """The files every sample's writer reads: camera.json (with the dataset's depth scale: to
     `farthest_m` where given, else the config's distance range), config.json, the BOP models and the
     evaluation models."""
-    layout.root.mkdir(parents=True, exist_ok=True)
+    make_output_folder(layout.root)
     cam = generator.cfg["camera"]
     depth_scale = dataset_depth_scale(generator.cfg, generator.model, farthest_m)
     camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
@@ -200,13 +200,14 @@ def prepare_output(job: RenderJob, plan: Plan) -> Layout:
         remove_stale_temporaries(layout.root)
         return layout
     farthest = max(s.distance_m for s in plan.specs) if is_sequence(plan.generator.cfg) else None
-    write_static_files(layout, plan.generator, farthest)
-    atomic_write_text(
-        layout.splits_path,
-        dumps({"split_by": job.split_by, "ratios": list(job.ratios), "seed": job.seed,
-               "splits": split_lists(plan.splits), "keys": {str(i): k for i, k in enumerate(plan.keys)}}),
-    )  # fmt: skip
-    atomic_write_text(layout.manifest_path, dumps(manifest))  # last: its presence marks a dataset
+    with writing(job.out):  # a failure (a full disk) is one line, and a new OUT is removed again
+        write_static_files(layout, plan.generator, farthest)
+        atomic_write_text(
+            layout.splits_path,
+            dumps({"split_by": job.split_by, "ratios": list(job.ratios), "seed": job.seed,
+                   "splits": split_lists(plan.splits), "keys": {str(i): k for i, k in enumerate(plan.keys)}}),
+        )  # fmt: skip
+        atomic_write_text(layout.manifest_path, dumps(manifest))  # last: its presence marks a dataset
     return layout
 
 
