@@ -4,7 +4,7 @@
                                   [--pose-ckpt POSE/last.pt]
 
 Trains `posenet train-detector`'s loop into RUN (resumes when RUN/last.pt exists; with --minutes, a new
-run fitted to that wall time), then scores
+run fitted to that wall time, and a run already in RUN is scored as it is), then scores
 RUN/best.pt (RUN/last.pt without a val split) against `bbox_visib` on the whole test split and on each
 factor group of `scgen.dataset.stats.sample_groups` (occlusion, distance, background), times the detector at
 batch 1 (median per-image forward over the test split, current device), checks the floors (FLOOR_*) and
@@ -26,8 +26,8 @@ import torch
 from posenet.detection.detect import box_metrics, detect_split, detection_entries
 from posenet.detection.detector import load_detector_config, visible_boxes
 from posenet.detection.train import BEST, train_detector
-from posenet.evaluate import EvalResult, evaluate, format_table, summary_rows
-from posenet.train import LAST
+from posenet.evaluation.evaluate import EvalResult, evaluate, format_table, summary_rows
+from posenet.training.train import LAST
 from scgen.dataset.stats import sample_groups
 from scgen.io.atomic import atomic_write_text
 
@@ -43,6 +43,9 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--out", type=Path, required=True, help="Detector run folder.")
     p.add_argument("--config", default="cpu", help="cpu | paper | a YAML/TOML file  [default: cpu]")
     p.add_argument("--max-steps", type=int, default=None, help="Stop training after N steps.")
+    p.add_argument(
+        "--minutes", type=float, default=None, help="A new run's wall-time budget (its schedule fitted to it)."
+    )
     p.add_argument("--groups-n", type=int, default=50, help="Samples per factor group.")
     p.add_argument("--groups-seed", type=int, default=0)
     p.add_argument("--pose-ckpt", type=Path, default=None, help="Pose checkpoint to evaluate on both boxes.")
