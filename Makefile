@@ -35,12 +35,12 @@ figures: install
 	rm -rf .figures && mkdir .figures
 	$(BIN)/scgen preview --out .figures/preview --n 16 --quiet
 	cp .figures/preview/preview.png docs/preview.png
-	$(BIN)/python docs/camera_figure.py
-	$(BIN)/python docs/sky_figure.py
+	$(BIN)/python benchmarks/figures/camera_figure.py
+	$(BIN)/python benchmarks/figures/sky_figure.py
 	$(BIN)/scgen preview --sequence 1 --config examples/approach.toml --out .figures/sequence --backend mitsuba --quiet
 	$(BIN)/python -c "import cv2; cv2.imwrite('docs/sequence_strip.jpg', \
 	  cv2.imread('.figures/sequence/sequence_1.png'), [cv2.IMWRITE_JPEG_QUALITY, 88])"
-	$(BIN)/python benchmarks/camera_before_after.py --before b970dd6
+	$(BIN)/python benchmarks/figures/camera_before_after.py --before b970dd6
 	rm -rf .figures
 
 assets: install

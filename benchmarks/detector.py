@@ -22,11 +22,13 @@ import statistics
 from pathlib import Path
 
 import torch
+from harness import parser, run_script
 
+from posenet import evaluate
 from posenet.detection.detect import box_metrics, detect_split, detection_entries
 from posenet.detection.detector import load_detector_config, visible_boxes
 from posenet.detection.train import BEST, train_detector
-from posenet.evaluation.evaluate import EvalResult, evaluate, format_table, summary_rows
+from posenet.evaluation.evaluate import EvalResult, format_table, summary_rows
 from posenet.training.train import LAST
 from scgen.dataset.stats import sample_groups
 from scgen.io.atomic import atomic_write_text
@@ -38,13 +40,16 @@ FLOOR_MISSES = 0.01  # share of images without a detection
 
 
 def parse_args() -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = parser(__doc__)
     p.add_argument("--data", type=Path, required=True, help="Rendered dataset (train, val, test splits).")
     p.add_argument("--out", type=Path, required=True, help="Detector run folder.")
     p.add_argument("--config", default="cpu", help="cpu | paper | a YAML/TOML file  [default: cpu]")
     p.add_argument("--max-steps", type=int, default=None, help="Stop training after N steps.")
     p.add_argument(
-        "--minutes", type=float, default=None, help="A new run's wall-time budget (its schedule fitted to it)."
+        "--minutes",
+        type=float,
+        default=None,
+        help="A new run's wall-time budget (its schedule fitted to it).",
     )
     p.add_argument("--groups-n", type=int, default=50, help="Samples per factor group.")
     p.add_argument("--groups-seed", type=int, default=0)
@@ -92,8 +97,7 @@ def floor_line(m: dict[str, float]) -> str:
     return "floors: " + "; ".join(f"{text} {'met' if ok else 'NOT met'}" for text, ok in checks)
 
 
-def main() -> None:
-    args = parse_args()
+def run(args: argparse.Namespace) -> None:
     cfg = load_detector_config(args.config)
     if not (args.out / LAST).is_file() or args.minutes is None:
         resume = (args.out / LAST).is_file()
@@ -132,6 +136,10 @@ def main() -> None:
             )
         )
         print(pose_side_by_side(on_gt, on_det, groups))
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -24,9 +24,10 @@ import time
 from collections import Counter
 
 import numpy as np
+from harness import parser, run_script
 
+from scgen import Generator
 from scgen.annotate import annotate
-from scgen.generator import Generator
 from scgen.render.camera.glare import FLARE_REACH_RAD, sun_view
 from scgen.render.lighting import mean_luminance
 from scgen.render.mitsuba.backend import MitsubaBackend
@@ -114,19 +115,26 @@ def plan(n: int, seed: int) -> None:
         print(f"{factor:<13}" + ", ".join(f"{g} {counter[g]}" for g in FACTOR_GROUPS[factor]))
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--n", type=int, default=400)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--lum-n", type=int, default=150)
     ap.add_argument("--plan-n", type=int, default=0, help="Count the planned groups of this many samples.")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     if args.n:
         coverage(args.n, args.seed)
     if args.lum_n:
         luminance(args.lum_n, args.seed)
     if args.plan_n:
         plan(args.plan_n, args.seed)
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

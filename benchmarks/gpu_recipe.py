@@ -12,7 +12,7 @@ The chain:
 1. render --n samples with every core into OUT/data (Blender where bpy imports, else Mitsuba; a render
    already there is resumed);
 2. train the config into OUT/run within --train-minutes (`posenet train --minutes`: the schedule is
-   fitted while it runs, so that its cosine ends at the budget; posenet.budget);
+   fitted while it runs, so that its cosine ends at the budget; posenet.training.budget);
 3. evaluate the test split at ground-truth boxes (Patch-PnP): the summary, ADD@0.02 m per factor group
    (`scgen stats --sample-groups`) and the batch-1 latency of the network;
 4. write OUT/report.md and OUT/report.json, and print the report.
@@ -27,22 +27,21 @@ import argparse
 import json
 import os
 import shutil
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import torch
+from harness import parser, run_script
 
-from posenet.bench import device_label
+from posenet import evaluate, train
 from posenet.config import config_from_dict
-from posenet.errors import PosenetError
-from posenet.evaluate import by_factor, by_factor_table, evaluate, format_table, summary_rows
+from posenet.evaluation.evaluate import by_factor, by_factor_table, format_table, summary_rows
+from posenet.export.bench import device_label
 from posenet.models.backbone import initial_weights
-from posenet.train import LAST, LOG_FILE, train
+from posenet.training.train import LAST, LOG_FILE
 from scgen.dataset.stats import sample_groups
-from scgen.errors import ScgenError
 from scgen.io.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 
@@ -98,19 +97,15 @@ TINY = Recipe(
 
 
 def parse_args() -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--out", type=Path, required=True, help="folder for data/, probe/, run/, report.*")
-    parser.add_argument(
-        "--tiny", action="store_true", help="the CPU-sized chain (CI): 24 images, a 64 px crop"
-    )
-    parser.add_argument("--n", type=int, help="samples to render (default: 3000; --tiny 24)")
-    parser.add_argument("--train-minutes", type=float, help="training budget (default: 25; --tiny 0.25)")
-    parser.add_argument("--variant", default="gdrnet", help="the paper row to train (default: gdrnet)")
-    parser.add_argument("--pretrained", help="the backbone's initial weights: imagenet | package | FILE")
-    parser.add_argument("--seed", type=int, default=0, help="dataset seed")
-    return parser.parse_args()
+    ap = parser(__doc__)
+    ap.add_argument("--out", type=Path, required=True, help="folder for data/, probe/, run/, report.*")
+    ap.add_argument("--tiny", action="store_true", help="the CPU-sized chain (CI): 24 images, a 64 px crop")
+    ap.add_argument("--n", type=int, help="samples to render (default: 3000; --tiny 24)")
+    ap.add_argument("--train-minutes", type=float, help="training budget (default: 25; --tiny 0.25)")
+    ap.add_argument("--variant", default="gdrnet", help="the paper row to train (default: gdrnet)")
+    ap.add_argument("--pretrained", help="the backbone's initial weights: imagenet | package | FILE")
+    ap.add_argument("--seed", type=int, default=0, help="dataset seed")
+    return ap.parse_args()
 
 
 def recipe_of(args: argparse.Namespace) -> Recipe:
@@ -237,11 +232,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def main() -> None:
-    args = parse_args()
-    try:
-        run(args)
-    except (PosenetError, ScgenError) as exc:
-        sys.exit(f"error: {exc}")
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

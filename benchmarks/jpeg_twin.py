@@ -23,10 +23,12 @@ import os
 import shutil
 from pathlib import Path
 
+from harness import parser, run_script
 from tqdm import tqdm
 
 from scgen.dataset.layout import Layout, open_dataset
 from scgen.dataset.writer import drawn_jpeg_quality, encode_rgb
+from scgen.errors import ScgenError
 from scgen.io.atomic import atomic_write_bytes
 from scgen.io.bop import split_names
 from scgen.io.image_file import read_image
@@ -48,7 +50,7 @@ def make_twin(data: Path, out: Path, splits: list[str], for_training: bool) -> i
     """Writes OUT; returns the number of images re-encoded."""
     layout, manifest = open_dataset(data)
     if manifest["rgb_format"] != "png":
-        raise SystemExit(f"error: {data} holds {manifest['rgb_format']} images, not PNG")
+        raise ScgenError(f"{data} holds {manifest['rgb_format']} images, not PNG")
     twin = Layout(out)
     skips = POSENET_SKIPS if for_training else set()
     left_out = set(split_names(data)) - set(splits)
@@ -75,17 +77,24 @@ def make_twin(data: Path, out: Path, splits: list[str], for_training: bool) -> i
     return len(records)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("data", type=Path, help="A PNG dataset (scgen render --rgb-format png).")
     ap.add_argument("out", type=Path, help="The twin's folder (must not exist).")
     ap.add_argument("--splits", nargs="+", default=["train", "val", "test"], help="Splits to carry over.")
     ap.add_argument("--for-training", action="store_true", help="Only what posenet reads.")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     if args.out.exists():
-        raise SystemExit(f"error: {args.out} exists")
+        raise ScgenError(f"{args.out} exists")
     n = make_twin(args.data, args.out, args.splits, args.for_training)
     print(f"wrote {args.out}: {n} images as JPEG at their drawn quality")
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -12,14 +12,15 @@ boxes). Then:
 - Table 4: per variant, the mean and spread (sample standard deviation) over the seeds of the rotation
   error (mean and median), translation error, ADD@0.02 m and ADD@0.1d; and per seed the paired
   difference of each variant against the first, with its mean and a 95 % t interval over the seeds.
-- Table 6: ADD@0.02 m per factor group of the test split (posenet.evaluate.by_factor, each column the
-  mean over that variant's seeds), the group sizes beside them; groups under 500 images are marked.
+- Table 6: ADD@0.02 m per factor group of the test split (posenet.evaluation.evaluate.by_factor, each
+  column the mean over that variant's seeds), the group sizes beside them; groups under 500
+  images are marked.
 
 Runs train one at a time in the order seed 0 of every variant, then seed 1, ..., so that an interrupted
 benchmark leaves paired seeds. Re-running with the same --out resumes: a finished run (its result.json)
 is kept, an unfinished one resumes from its last.pt. Each run records its wall time and the machine's
 load average before and after. Without --data the control set is rendered into OUT/data
-(benchmarks/posenet_control.py's scene: 2,400 Mitsuba images at 320x240, seed 7).
+(benchmarks/figures/posenet_control.py's scene: 2,400 Mitsuba images at 320x240, seed 7).
 
 Writes OUT/run-VARIANT-seedS/ (the run and its result.json) and OUT/ablation.json (every figure printed).
 """
@@ -29,23 +30,18 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import statistics
-import time
 from pathlib import Path
 from typing import Any
 
-from posenet_control import render
-from posenet_learning import SEED, pct, positive, run_script, schedule
+from harness import parser, pct, positive, run_script
+from harness.pose import ABLATION_STEPS, render_control, run_config, train_one
 
-from posenet.config import TrainConfig, load_config
 from posenet.errors import PosenetError
-from posenet.evaluate import by_factor, evaluate, format_table
-from posenet.train import LAST, train
+from posenet.evaluation.evaluate import by_factor, format_table
 from scgen.dataset.stats import sample_groups
 from scgen.io.atomic import atomic_write_text
 
-STEPS = 1260  # 6 epochs of the control's 1,680 training images at batch 8
 VARIANTS = ("gdrnet", "gap-gdrnet")
 SEEDS = (0, 1, 2)
 GROUP_N = 500  # the paper's images per factor group
@@ -61,51 +57,14 @@ T_975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571}  # Student's t, two-
 
 
 def parse_args() -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = parser(__doc__)
     ap.add_argument("--out", type=Path, required=True, help="Output: run-VARIANT-seedS/, ablation.json.")
     ap.add_argument("--data", type=Path, default=None, help="The control's dataset [rendered into OUT/data].")
     ap.add_argument("--variant", action="append", default=None, help="Repeatable [gdrnet, gap-gdrnet].")
     ap.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), help="Training seeds [0 1 2].")
-    ap.add_argument("--steps", type=positive, default=STEPS, help="Steps of each run [%(default)s].")
+    ap.add_argument("--steps", type=positive, default=ABLATION_STEPS, help="Steps of each run [%(default)s].")
     ap.add_argument("--eval-workers", type=int, default=0, help="Evaluation loader processes [0].")
     return ap.parse_args()
-
-
-def run_config(variant: str, seed: int, steps: int, data: Path) -> TrainConfig:
-    """The CPU recipe for `variant` with training seed `seed`, its schedule fitted to `steps` steps."""
-    cfg = load_config("smoke", variant=variant)
-    cfg.optim.seed = seed
-    cfg.optim.epochs = max(1, math.ceil(steps / schedule(data, cfg)[1]))
-    return cfg
-
-
-def train_one(data: Path, run_dir: Path, cfg: TrainConfig, steps: int, eval_workers: int) -> dict[str, Any]:
-    """Train (or resume) one run to `steps` steps and evaluate it on the test split; result.json."""
-    done = run_dir / "result.json"
-    if done.exists():
-        return json.loads(done.read_text())
-    load_before = os.getloadavg()
-    tic = time.perf_counter()
-    ckpt = train(data, run_dir, cfg, resume=(run_dir / LAST).exists(), max_steps=steps)
-    wall = time.perf_counter() - tic
-    test = evaluate(data, ckpt, "test", workers=eval_workers)
-    result = {
-        "variant": test.variant,
-        "seed": cfg.optim.seed,
-        "steps": steps,
-        "ckpt": str(ckpt),
-        "test": test.summary,
-        "train_wall_s": wall,
-        "load_before": load_before,
-        "load_after": os.getloadavg(),
-    }
-    atomic_write_text(done, json.dumps(result, indent=1) + "\n")
-    s = test.summary
-    load = f"load {load_before[1]:.2f} -> {result['load_after'][1]:.2f}"
-    print(f"{run_dir.name}: {wall / 60:.1f} min ({load}); "
-          f"test rotation {s['re_deg_median']:.2f} deg median, ADD@0.02m {pct(s['add_0.02m'])} %, "
-          f"ADD@0.1d {pct(s['add_0.1d'])} %", flush=True)  # fmt: skip
-    return result
 
 
 def spread(values: list[float]) -> str:
@@ -161,7 +120,7 @@ def run(args: argparse.Namespace) -> None:
     if len(set(variants)) < len(variants) or len(set(args.seeds)) < len(args.seeds):
         raise PosenetError("--variant and --seeds must not repeat a value")
     args.out.mkdir(parents=True, exist_ok=True)
-    data = args.data if args.data is not None else render(args.out, 2400, SEED)
+    data = args.data if args.data is not None else render_control(args.out)
     if not data.is_dir():
         raise PosenetError(f"--data {data} is not a folder")
     results: dict[str, list[dict[str, Any]]] = {v: [] for v in variants}

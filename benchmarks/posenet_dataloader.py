@@ -4,8 +4,8 @@ Prints (1) training samples/s of one loader process with the paper's augmentatio
 contrast at p=0.8, background replacement at p=0.5) at the paper's 256/64 resolution, (2) the DataLoader
 throughput with --workers processes, (3) the training step time (forward, losses, backward, Ranger step)
 of --config (or each --variant) on the current device (paper on a GPU, smoke on a CPU by default), with
-the weights and images in training's memory format (posenet.train.memory_format: channels-last on a CPU)
-and, on a CPU, also in the default contiguous one, side by side.
+the weights and images in training's memory format (posenet.training.train.memory_format:
+channels-last on a CPU) and, on a CPU, also in the default contiguous one, side by side.
 
 Usage: python benchmarks/posenet_dataloader.py [--data DIR] [--workers 2] [--batch 8] [--config paper|smoke]
        [--variant V ...] [--steps 5]
@@ -20,45 +20,14 @@ import time
 from pathlib import Path
 
 import torch
-from torch.utils.data import DataLoader
+from harness import parser, run_script
+from harness.pose import loader_rate, paper_dataset, process_rate
 
 from posenet.config import load_config
-from posenet.data import PoseDataset, open_split
+from posenet.data import open_split
 from posenet.models import create_model
-from posenet.train import compared_layouts, make_optimizer, pm_loss_points, train_step, worker_init
+from posenet.training.train import compared_layouts, make_optimizer, pm_loss_points, train_step, worker_init
 from scgen.run.runner import RenderJob, run_render
-
-
-def paper_dataset(data: Path) -> PoseDataset:
-    cfg = load_config("paper")
-    return open_split(data, "train", cfg.data, cfg.model_config(), train=True)
-
-
-def process_rate(ds: PoseDataset, n: int) -> float:
-    """Training samples/s of one process (the work of one loader worker)."""
-    for i in range(len(ds)):  # build the background pool and warm the file cache
-        ds[(0, i)]
-    tic = time.perf_counter()
-    for k in range(n):
-        ds[(1 + k // len(ds), k % len(ds))]
-    return n / (time.perf_counter() - tic)
-
-
-def loader_rate(ds: PoseDataset, workers: int, n: int, batch: int) -> float:
-    """Samples/s through a training-like DataLoader (batches, `workers` processes), once warm.
-
-    The keys run through several epochs in one pass: with a small benchmark dataset an epoch is one
-    or two batches, and the loader would drain and restart at its first process every epoch.
-    """
-    warm = 2 * max(workers, 1) * batch  # two batches per process: all up, background pools built
-    keys = [(1 + k // len(ds), k % len(ds)) for k in range(warm + n)]
-    loader = DataLoader(ds, batch_size=batch, sampler=keys, num_workers=workers, worker_init_fn=worker_init)
-    done, tic = 0, None
-    for b in loader:
-        done += len(b["key"])
-        if tic is None and done == warm:
-            tic, done = time.perf_counter(), 0
-    return done / (time.perf_counter() - tic)
 
 
 def step_time(
@@ -91,8 +60,8 @@ def step_time(
     return sum(times[2:]) / steps, bs
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--data", type=Path, default=None)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--samples", type=int, default=300, help="Samples timed per measurement.")
@@ -102,7 +71,10 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=8, help="Loader batch size (the paper trains with 24).")
     ap.add_argument("--steps", type=int, default=5)
     ap.add_argument("--variant", action="append", help="Step time of this variant (repeatable).")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     data = args.data
     if data is None:
         data = Path(tempfile.mkdtemp()) / "ds"
@@ -125,6 +97,10 @@ def main() -> None:
                 f"train step ({name}, batch {bs}, {dev}, {what}): "
                 f"{1000 * sec:.1f} ms ({bs / sec:.1f} samples/s)"
             )
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -8,10 +8,11 @@ For each --data (a scgen render the checkpoints were not trained on), the images
 the object are copied, renamed, into OUT/NAME/input with the dataset's camera.json and nothing else; then
 `posenet predict` runs on that folder with the detector, in torch and (after `posenet export` of both
 networks) in onnxruntime. Each written prediction is scored against its label: rotation median, ADD@0.1d
-(posenet.metrics), and the detector's IoU against bbox_visib; beside it, `posenet eval` at the ground-truth
+(posenet.evaluation.metrics), and the detector's IoU against bbox_visib; beside it, `posenet eval` at the
+ground-truth
 boxes. predict's own images per second (the batch, model loading excluded) are read from its output.
 With --scale S the user's copies are the images resized S times (bicubic) with camera.json's
-intrinsics scaled alike (posenet.predict.camera.resized): a user camera of S times the size, which
+intrinsics scaled alike (posenet.data.camera.resized): a user camera of S times the size, which
 predict warps back into the training camera; the labels and the poses do not change.
 Writes OUT/report.json and prints one table. The goal of issue 50: ADD@0.1d at detected boxes within 3
 points of that at ground-truth boxes, and >= 30 images/s at 640x480 through ONNX on 2 cores.
@@ -31,15 +32,16 @@ from typing import Any
 import cv2
 import numpy as np
 import torch
+from harness import parser, run_script
 
+from posenet import Predictor, evaluate
 from posenet.checkpoint import load_checkpoint
 from posenet.config import config_from_dict
+from posenet.data.camera import read_camera_file, resized
 from posenet.data.layout import Instance, scan_split
 from posenet.detection.detect import iou
-from posenet.evaluate import evaluate
-from posenet.metrics import sample_errors, summarise
-from posenet.predict.camera import read_camera_file, resized
-from posenet.predict.predictor import Predictor
+from posenet.errors import PosenetError
+from posenet.evaluation.metrics import sample_errors, summarise
 from scgen.io import bop
 
 POSENET = [sys.executable, "-m", "posenet.cli"]
@@ -73,8 +75,9 @@ def user_folder(data: Path, split: str, obj_id: int, folder: Path, scale: float)
 def run_predict(args: list[Any]) -> tuple[Path, float]:
     """`posenet predict ARGS`; its OUT and its printed images per second."""
     res = subprocess.run([*POSENET, "predict", *map(str, args)], capture_output=True, text=True)
-    if res.returncode != 0:
-        raise SystemExit(f"posenet predict failed:\n{res.stdout}\n{res.stderr}")
+    if res.returncode != 0:  # its error is its last line
+        last = (res.stderr.strip().splitlines() or ["no message"])[-1]
+        raise PosenetError(f"posenet predict exited with status {res.returncode}: {last}")
     rate = float(re.search(r"([\d.]+) images/s", res.stdout).group(1))  # type: ignore[union-attr]
     return Path(args[args.index("--out") + 1]), rate
 
@@ -82,7 +85,8 @@ def run_predict(args: list[Any]) -> tuple[Path, float]:
 def score(
     predictions: Path, names: dict[str, Instance], predictor: Predictor, scale: float
 ) -> dict[str, Any]:
-    """Pose figures (posenet.metrics.summarise) and box figures of a predictions.jsonl against its labels
+    """Pose figures (posenet.evaluation.metrics.summarise) and box figures of a predictions.jsonl against
+    its labels
     (boxes in the user's image, `scale` times the labelled one, are scaled back)."""
     obj = predictor.obj
     geometry = [torch.from_numpy(a) for a in (obj.pm_points, obj.vertices, obj.symmetries)]
@@ -160,8 +164,8 @@ def table(report: dict[str, Any]) -> str:
     return "\n".join(rows)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--pose", type=Path, required=True, help="Pose checkpoint (posenet train's last.pt).")
     ap.add_argument("--detector", type=Path, required=True, help="Detector checkpoint (train-detector's).")
     ap.add_argument(
@@ -170,7 +174,10 @@ def main() -> None:
     ap.add_argument("--split", default="test", help="Split of each --data [test].")
     ap.add_argument("--out", type=Path, required=True, help="Working and report folder.")
     ap.add_argument("--scale", type=float, default=1.0, help="Resize the user's images S times [1].")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     onnx = (args.out / "onnx" / "pose.onnx", args.out / "onnx" / "detector.onnx")
     if not all(p.is_file() for p in onnx):
@@ -179,6 +186,10 @@ def main() -> None:
     report = {d.name: one_dataset(d, args.out / d.name, args, onnx) for d in args.data}
     (args.out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     print(table(report))
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -19,25 +19,9 @@ import filecmp
 import os
 import subprocess
 import sys
-import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-@contextmanager
-def revision_tree(rev: str) -> Iterator[Path]:
-    """A temporary folder holding `tmp/code`, the tree at git revision `rev` (a detached worktree, removed on
-    exit), for a child process to import scgen from (PYTHONPATH)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        code = Path(tmp) / "code"
-        subprocess.run(["git", "worktree", "add", "--detach", "-q", str(code), rev], cwd=ROOT, check=True)
-        try:
-            yield Path(tmp)
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(code)], cwd=ROOT, check=True)
+from harness import ROOT, parser, revision_tree, run_script
 
 
 def render(
@@ -80,8 +64,8 @@ def differing_files(a: Path, b: Path) -> tuple[int, list[str]]:
     return len(files_a | files_b), differ
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--against", required=True, help="git revision to compare with (e.g. HEAD~1, a tag)")
     ap.add_argument("--backends", nargs="+", default=["mitsuba", "blender"])
     ap.add_argument("--n", type=int, default=8)
@@ -89,7 +73,10 @@ def main() -> None:
     ap.add_argument("--resolution", default="160x120")
     ap.add_argument("--camera", help="camera preset (e.g. speedplus: through a lens); default: the config's")
     ap.add_argument("--rgb-format", choices=["png", "jpg"], help="image format for both; default: each's own")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     failed = False
     with revision_tree(args.against) as tmp:
         for backend in args.backends:
@@ -103,6 +90,10 @@ def main() -> None:
                 print(f"  differs: {path}")
             failed |= bool(differ)
     sys.exit(1 if failed else 0)
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -7,18 +7,23 @@ from __future__ import annotations
 
 import argparse
 
+from harness import parser, run_script
+
+from scgen import Generator
 from scgen.dataset.splits import SPLITS, leakage, plan_splits
-from scgen.generator import Generator
 from scgen.scenes import load_config
 from scgen.scenes.factors import spec_key
 from scgen.scenes.model import load_target
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--n", type=int, nargs="+", default=[1000, 5000])
     ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     cfg, model = load_config(), load_target()
     ratios = (0.7, 0.1, 0.2)
     head = f"{'n':>6} {'mode':<8} {'combos':>7} {'train/val/test %':>20} {'max dev pp':>10}"
@@ -33,6 +38,10 @@ def main() -> None:
             leak = leakage(keys, split_of)
             print(f"{n:>6} {mode:<8} {len(set(keys)):>7} {'/'.join(f'{s:.1f}' for s in shares):>20} "
                   f"{dev:>10.2f}  {tuple(leak.values())}")  # fmt: skip
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -65,7 +65,7 @@ class DataConfig:
     augment: str = "paper"
     workers: int = 4  # DataLoader worker processes per training process
     # > 0: train on this many images of the train split, the first of one fixed shuffled order, so that a
-    # smaller set lies inside a larger one (accuracy against data: benchmarks/posenet_data_curve.py)
+    # smaller set lies inside a larger one (accuracy against data: benchmarks/figures/posenet_data_curve.py)
     train_images: int = 0
 
 

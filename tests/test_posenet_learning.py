@@ -8,7 +8,7 @@ best constant prediction and the rotation error stays at a random rotation's ~12
 measured on the training images. What generalises in that budget is measured on 32 held-out crops (the
 set's 8 val and test images and 24 images of another seed, scenes the training never saw): the visible
 mask, against the best mask that ignores the image. Held-out pose comes from the benchmarks
-(`benchmarks/posenet_control.py`, `benchmarks/posenet_learning.py`; docs/benchmarks.md).
+(`benchmarks/figures/posenet_control.py`, `benchmarks/figures/posenet_learning.py`; docs/benchmarks.md).
 """
 
 from __future__ import annotations

@@ -137,7 +137,7 @@ def memory_format(device: torch.device) -> torch.memory_format:
     """How training lays out the network's weights and input images: channels-last on a CPU, where
     oneDNN's NHWC convolutions make the smoke preset's step faster (240 -> 185 ms on 2 threads, batch 8:
     `python benchmarks/posenet_dataloader.py --data DIR`) and the CPU detector's (603 -> 460 ms:
-    `python benchmarks/detector_step.py --data DIR`); the default elsewhere (unmeasured)."""
+    `python benchmarks/probes/detector_step.py --data DIR`); the default elsewhere (unmeasured)."""
     return torch.channels_last if device.type == "cpu" else torch.contiguous_format
 
 

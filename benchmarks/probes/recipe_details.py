@@ -1,8 +1,8 @@
 """GDR-Net's recipe details and the field's augmentation, each measured on the CPU preset at equal compute.
 
 Every variant trains the `smoke` config for the same number of epochs (the same steps, batch and lr
-schedule) with one detail changed, through the learning benchmark (benchmarks/posenet_learning.py, into
-OUT/VARIANT), and is evaluated on the test split (scene-factor combinations never seen in training):
+schedule) with one detail changed, through the learning benchmark (benchmarks/figures/posenet_learning.py,
+into OUT/VARIANT), and is evaluated on the test split (scene-factor combinations never seen in training):
 
 - baseline: the smoke preset as it is;
 - grad-centralization: optim.grad_centralization (Ranger's, GDR-Net's `use_gc`);
@@ -18,7 +18,7 @@ OUT/VARIANT/learning.json exists is not trained again, so an interrupted run goe
 Prints one table, a column per variant: test figures, the train split's rotation error and the mean of each
 loss term over the last 10 % of the steps; writes OUT/recipe_details.json.
 
-    python benchmarks/recipe_details.py --out /tmp/recipe [--epochs 20]
+    python benchmarks/probes/recipe_details.py --out /tmp/recipe [--epochs 20]
 
 Each variant is one CPU training (20 epochs: about 10 min on 2 idle cores).
 """
@@ -34,15 +34,18 @@ from typing import Any
 
 import numpy as np
 import yaml
-from posenet_learning import BACKEND, RENDER_N, RESOLUTION, SEED, WORKERS
 
-from posenet.evaluate import evaluate, format_table
-from posenet.losses import LOSS_TERMS
-from posenet.train import LOG_FILE
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import BACKEND, RENDER_N, RESOLUTION, SEED, WORKERS, parser, run_script
+
+from posenet import evaluate
+from posenet.evaluation.evaluate import format_table
+from posenet.training.losses import LOSS_TERMS
+from posenet.training.train import LOG_FILE
 from scgen.io.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 
-LEARNING = Path(__file__).with_name("posenet_learning.py")
+LEARNING = Path(__file__).resolve().parents[1] / "figures" / "posenet_learning.py"
 # variant -> (config overrides of the smoke preset, camera of its training renders)
 VARIANTS: dict[str, tuple[dict[str, Any], str]] = {
     "baseline": ({}, "default"),
@@ -67,7 +70,7 @@ FIGURES = (
 
 
 def parse_args() -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = parser(__doc__)
     ap.add_argument("--out", type=Path, required=True, help="Output folder.")
     ap.add_argument("--data", type=Path, default=None, help="The default camera's dataset [render one].")
     ap.add_argument("--ideal-data", type=Path, default=None, help="The same scenes through the ideal camera.")
@@ -110,8 +113,7 @@ def last_losses(run: dict[str, Any]) -> dict[str, float]:
     return {term: float(np.mean([r[term] for r in tail])) for term in terms}
 
 
-def main() -> None:
-    args = parse_args()
+def run(args: argparse.Namespace) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     names = args.variant or list(VARIANTS)
     data = {"default": dataset(args.data, args.out, "default")}
@@ -135,6 +137,10 @@ def main() -> None:
     print(format_table(["figure", *names], rows))
     atomic_write_text(args.out / "recipe_details.json", json.dumps(figures, indent=1) + "\n")
     print(f"wrote {args.out / 'recipe_details.json'}")
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """posenet control: the CPU recipe on a problem it can learn at CPU scale, tested on the held-out split.
 
-    python benchmarks/posenet_control.py --out /tmp/control
+    python benchmarks/figures/posenet_control.py --out /tmp/control
 
 Renders 2400 Mitsuba samples at 320x240 (seed 7, split by factor combinations: 1680 / 240 / 480) whose
 target attitude lies in a rendezvous corridor (`pose.distribution: cone`: the line of sight within 20 deg
@@ -42,45 +42,38 @@ import dataclasses
 import json
 import math
 import shutil
+import sys
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 import torch
-from posenet_learning import (
-    BACKEND,
-    SEED,
-    WORKERS,
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import BACKEND, SEED, fresh_run, parser, pct, run_script
+from harness.pose import (
+    CONTROL_N,
+    CONTROL_RESOLUTION,
+    CONTROL_SCENE,
     floor_lines,
     floor_rows,
-    pct,
-    run_script,
+    prior,
+    render_control,
+    run_folder,
     schedule,
     train_and_follow,
 )
 
+from posenet import evaluate, train
 from posenet.config import load_config
 from posenet.data import open_split
-from posenet.data.layout import scan_split
-from posenet.data.object_model import load_object_model
-from posenet.errors import PosenetError
-from posenet.evaluate import evaluate
+from posenet.evaluation.metrics import rotation_error_deg, translation_error
 from posenet.geometry import roi_translation
-from posenet.metrics import add_error, depth_error_rel, rotation_error_deg, translation_error
-from posenet.ransac import MIN_POINTS
-from posenet.train import train
-from scgen.dataset.layout import Layout
+from posenet.predict.ransac import MIN_POINTS
 from scgen.io.atomic import atomic_write_text
-from scgen.run.runner import RenderJob, run_render
-from scgen.scenes.attitude import nominal_rotation, ray_rotation
 
-N, RESOLUTION = 2400, (320, 240)
 LEARNING_STEPS = 10440  # the CPU recipe's schedule on the learning benchmark (120 epochs x 87 steps)
-SCENE = {
-    "pose": {"distribution": "cone", "max_angle_deg": 20.0, "roll_deg": [-20.0, 20.0]},
-    "distance": {"min_px": 240.0, "max_px": 360.0},
-}
 # (split, figure, bound, "max" | "min")
 FLOORS = (
     ("test", "re_deg_median", 5.0, "max"),
@@ -90,45 +83,15 @@ FLOORS = (
 
 
 def parse_args() -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = parser(__doc__)
     ap.add_argument("--out", type=Path, required=True, help="Output folder: data/, run-gdrnet/, report.json.")
-    ap.add_argument("--n", type=int, default=N, help="Samples to render [%(default)s].")
+    ap.add_argument("--n", type=int, default=CONTROL_N, help="Samples to render [%(default)s].")
     ap.add_argument("--seed", type=int, default=SEED, help="Dataset seed [%(default)s].")
     ap.add_argument("--steps", type=int, default=LEARNING_STEPS, help="Training steps [%(default)s].")
     ap.add_argument("--eval-every", type=int, default=2610, help="Test evaluation interval [%(default)s].")
     ap.add_argument("--overwrite", action="store_true", help="Delete an existing OUT/run-gdrnet first.")
     ap.add_argument("--diagnose", action="store_true", help="Only the diagnosis, on OUT/data: no training.")
     return ap.parse_args()
-
-
-def render(out: Path, n: int, seed: int, scene: dict[str, Any] = SCENE) -> Path:
-    """The control set (or `scene`'s variant of it) in OUT/data, resumed when a render is there."""
-    data = out / "data"
-    job = RenderJob(out=data, n=n, seed=seed, backend=BACKEND, resolution=RESOLUTION, workers=WORKERS,
-                    overrides=scene)  # fmt: skip
-    s = run_render(job, progress=True)
-    print(f"dataset: {data}, rendered {s['rendered']}, reused {s['skipped']}, {s['total_s']:.0f} s; "
-          + ", ".join(f"{k} {v}" for k, v in s["splits"].items()))  # fmt: skip
-    return data
-
-
-def prior(data: Path, obj_id: int = 1) -> dict[str, float]:
-    """What knowing the corridor alone scores on the test split: the nominal attitude at the true
-    translation (rotation error, ADD@0.1d of the rotation) and the train split's median depth along the
-    true ray (ADD@0.1d of the translation, median depth error)."""
-    R0 = nominal_rotation(json.loads(Layout(data).config_path.read_text())["pose"])
-    train_z = float(np.median([i.t[2] for i in scan_split(data, "train", obj_id)]))
-    test = [i for i in scan_split(data, "test", obj_id) if i.px_count_visib > 0]
-    R_gt, t_gt = (torch.from_numpy(np.stack([getattr(i, k) for i in test])) for k in ("R", "t"))
-    R_pred = torch.from_numpy(np.stack([ray_rotation(i.t) @ R0 for i in test]))
-    t_pred = t_gt * (train_z / t_gt[:, 2:])
-    obj = load_object_model(data, obj_id, 1, 1000)
-    points, threshold = torch.from_numpy(obj.pm_points), 0.1 * obj.diameter
-    # medians as posenet eval takes them (the mean of the middle two; torch's median takes the lower)
-    return {"re_deg_median": float(np.median(rotation_error_deg(R_pred, R_gt).numpy())),
-            "add_rot_0.1d": float((add_error(R_pred, t_gt, R_gt, t_gt, points) < threshold).double().mean()),
-            "te_0.1d": float((add_error(R_gt, t_pred, R_gt, t_gt, points) < threshold).double().mean()),
-            "tz_rel_median": float(np.median(depth_error_rel(t_pred, t_gt).numpy()))}  # fmt: skip
 
 
 def targets_give_the_pose(data: Path, items: int = 200) -> dict[str, float]:
@@ -194,21 +157,15 @@ def diagnose(data: Path, out: Path) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     args.out.mkdir(parents=True, exist_ok=True)
-    data = render(args.out, args.n, args.seed)
+    data = render_control(args.out, args.n, args.seed)
     if args.diagnose:
         diagnosis = diagnose(data, args.out)
         atomic_write_text(args.out / "diagnosis.json", json.dumps(diagnosis, indent=1) + "\n")
         return diagnosis
     cfg = load_config("smoke")
     cfg.optim.epochs = max(1, math.ceil(args.steps / schedule(data, cfg)[1]))
-    follow = argparse.Namespace(out=args.out, config="smoke", steps=args.steps, eval_every=args.eval_every,
-                                eval_workers=0)  # fmt: skip
-    run_dir = args.out / "run-gdrnet"
-    if (run_dir / "last.pt").exists():
-        if not args.overwrite:
-            raise PosenetError(f"{run_dir} already holds a run; pass --overwrite or choose another --out")
-        shutil.rmtree(run_dir)
-    result = train_and_follow(follow, data, cfg)
+    fresh_run(run_folder(args.out, cfg), args.overwrite)
+    result = train_and_follow(data, args.out, cfg, "smoke", FLOORS, args.steps, args.eval_every)
     test = result["final"]["test"]
     report = {
         "test": test,
@@ -220,8 +177,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "n": args.n,
             "seed": args.seed,
             "backend": BACKEND,
-            "resolution": "x".join(map(str, RESOLUTION)),
-            "scene": SCENE,
+            "resolution": "x".join(map(str, CONTROL_RESOLUTION)),
+            "scene": CONTROL_SCENE,
         },  # fmt: skip
         "training": {k: result[k] for k in ("steps", "schedule_steps", "train_instances", "timing", "curve")},
     }

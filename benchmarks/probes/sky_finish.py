@@ -4,18 +4,23 @@ finishes, on both backends side by side (issue 30: within 10 %).
 Each backend renders the same samples under both configs, interleaved (sample i old, then new), with
 the ideal camera so only what issue 30 changed differs; the first sample of each config is a warm-up
 (it loads Blue Marble and Hipparcos, once per process). Also prints the background image alone per
-kind. Usage: python benchmarks/sky_finish.py [--n 12] [--resolution 640x480] [--quality default]
+kind. Usage: python benchmarks/probes/sky_finish.py [--n 12] [--resolution 640x480] [--quality default]
 [--backends mitsuba,blender]
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from scgen.generator import Generator
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import parser, run_script
+
+from scgen import Generator
 from scgen.render.sky.backgrounds import background_image
 
 CONFIGS = {
@@ -61,13 +66,16 @@ def time_backgrounds(resolution: tuple[int, int], n: int = 8) -> None:
         print(f"  background {kind:<9} {row[0]:7.1f} ms -> {row[1]:7.1f} ms")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--n", type=int, default=12)
     ap.add_argument("--resolution", default="640x480")
     ap.add_argument("--quality", default="default")
     ap.add_argument("--backends", default="mitsuba,blender")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     resolution = tuple(int(x) for x in args.resolution.split("x"))
     print(f"{args.n} samples of seed 0 at {args.resolution}, quality {args.quality}, ideal camera")
     for backend in args.backends.split(","):
@@ -78,6 +86,10 @@ def main() -> None:
         print(f"  {backend:<8} after / before: mean {after.mean() / before.mean():.3f}, "
               f"median of per-sample ratios {np.median(after / before):.3f}")  # fmt: skip
     time_backgrounds(resolution)
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -1,15 +1,15 @@
 """posenet accuracy against the attitude range: the corridor control widened, at equal compute.
 
-    python benchmarks/posenet_range.py --out OUT [--angles 20 45 90 180] [--steps 1260]
+    python benchmarks/figures/posenet_range.py --out OUT [--angles 20 45 90 180] [--steps 1260]
 
 For each cone half-angle A renders the corridor control's set with only the attitude range changed
-(benchmarks/posenet_control.py's scene: 2,400 Mitsuba images at 320x240, seed 7, the target 120-180 px
+(benchmarks/figures/posenet_control.py's scene: 2,400 Mitsuba images at 320x240, seed 7, the target 120-180 px
 across; `pose.max_angle_deg` A and `pose.roll_deg` [-A, A], so 180 is every attitude) into
 OUT/cone-A/data. The seed fixes every other draw (sun, sky, distance, occluders, split), so the sets
 differ in the target's attitude alone. Then trains the CPU recipe (GDR-Net, `--config smoke`, the
 ablation's schedule: benchmarks/posenet_ablation.py, seed 0) for --steps on each and tests it on the
 test split (480 images, ground-truth boxes). Beside each point, what the corridor alone scores: the
-nominal attitude as the estimate (posenet_control.prior).
+nominal attitude as the estimate (harness.pose.prior).
 
 Resumable: renders resume, a finished run (its result.json) is kept. After each run OUT/range.json and
 OUT/range.png (test rotation median and ADD@0.1d against the half-angle) are rewritten. On 2 cores:
@@ -20,13 +20,22 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
-from posenet_ablation import STEPS, run_config, train_one
-from posenet_control import SCENE, N, prior, render
-from posenet_data_curve import CHANCE_RE_DEG
-from posenet_learning import SEED, pct, positive, run_script
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import SEED, parser, pct, positive, pyplot, run_script
+from harness.pose import (
+    ABLATION_STEPS,
+    CHANCE_RE_DEG,
+    CONTROL_N,
+    CONTROL_SCENE,
+    prior,
+    render_control,
+    run_config,
+    train_one,
+)
 
 from scgen.io.atomic import atomic_write_text
 
@@ -35,22 +44,25 @@ VARIANT = "gdrnet"  # the ablation's pick on a CPU (docs/benchmarks.md)
 
 
 def parse_args() -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = parser(__doc__)
     ap.add_argument("--out", type=Path, required=True, help="Output: cone-A/, range.json, range.png.")
     ap.add_argument("--angles", type=float, nargs="+", default=list(ANGLES), help="Half-angles (deg).")
-    ap.add_argument("--steps", type=positive, default=STEPS, help="Steps of each run [%(default)s].")
+    ap.add_argument("--steps", type=positive, default=ABLATION_STEPS, help="Steps of each run [%(default)s].")
     ap.add_argument("--seed", type=int, default=0, help="Training seed [%(default)s].")
     return ap.parse_args()
 
 
 def scene(angle: float) -> dict[str, Any]:
     """The control's scene with a cone of half-angle `angle` and the roll range to match."""
-    return {**SCENE, "pose": {**SCENE["pose"], "max_angle_deg": angle, "roll_deg": [-angle, angle]}}
+    return {
+        **CONTROL_SCENE,
+        "pose": {**CONTROL_SCENE["pose"], "max_angle_deg": angle, "roll_deg": [-angle, angle]},
+    }
 
 
 def point(out: Path, angle: float, steps: int, seed: int) -> dict[str, Any]:
     """Render (or resume) the set of half-angle `angle`, train one run on it and test it."""
-    data = render(out / f"cone-{angle:g}", N, SEED, scene(angle))
+    data = render_control(out / f"cone-{angle:g}", CONTROL_N, SEED, scene(angle))
     cfg = run_config(VARIANT, seed, steps, data)
     result = train_one(data, data.parent / f"run-{VARIANT}-seed{seed}", cfg, steps, eval_workers=0)
     return {"angle": angle, "steps": steps, "seed": seed,
@@ -58,11 +70,7 @@ def point(out: Path, angle: float, steps: int, seed: int) -> dict[str, Any]:
 
 
 def plot(path: Path, points: list[dict[str, Any]], steps: int) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     points = sorted(points, key=lambda p: p["angle"])
     x = [p["angle"] for p in points]
     fig, ax = plt.subplots(figsize=(8, 5))
@@ -83,8 +91,8 @@ def plot(path: Path, points: list[dict[str, Any]], steps: int) -> None:
     lines = [h for a in (ax, ax2) for h in a.get_legend_handles_labels()[0]]
     ax.legend(lines, [h.get_label() for h in lines], loc="center right", fontsize=8)
     ax.grid(True, alpha=0.3)
-    ax.set_title(f"GDR-Net, CPU recipe, {steps} steps each ({N:,} images a set); {points[0]['test']['n']} "
-                 "test images")  # fmt: skip
+    ax.set_title(f"GDR-Net, CPU recipe, {steps} steps each ({CONTROL_N:,} images a set); "
+                 f"{points[0]['test']['n']} test images")  # fmt: skip
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -1,6 +1,6 @@
 """The camera stage's cost per sample beside the render's, side by side in one run.
 
-    python benchmarks/camera_stage.py [--n 6] [--backends blender,mitsuba]
+    python benchmarks/probes/camera_stage.py [--n 6] [--backends blender,mitsuba]
 
 For each backend at 640x480 (default camera) and 1920x1200 (speedplus camera), renders samples 1..n
 (sample 0 warms the renderer up) and prints the median time per sample of the whole render and of the
@@ -10,14 +10,18 @@ stage's share. Target: <= 5 % of a Blender 640x480 sample.
 
 from __future__ import annotations
 
+import argparse
 import statistics
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-import click
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import parser, run_script
 
-from scgen.generator import Generator
+from scgen import Generator
 from scgen.render.blender import backend as blender
 from scgen.render.mitsuba import backend as mitsuba_backend
 
@@ -34,11 +38,16 @@ def timed(fn: Callable[..., Any], spent: list[float]) -> Callable[..., Any]:
     return wrapper
 
 
-@click.command()
-@click.option("--n", type=int, default=6, show_default=True, help="Samples timed per case (after a warm-up).")
-@click.option("--backends", default="blender,mitsuba", show_default=True)
-@click.option("--quality", default="default", show_default=True)
-def main(n: int, backends: str, quality: str) -> None:
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
+    ap.add_argument("--n", type=int, default=6, help="Samples timed per case, after a warm-up [6].")
+    ap.add_argument("--backends", default="blender,mitsuba", help="[blender,mitsuba]")
+    ap.add_argument("--quality", default="default", help="[default]")
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
+    n, backends, quality = args.n, args.backends, args.quality
     modules = {"blender": blender, "mitsuba": mitsuba_backend}
     print(f"{'backend':8} {'camera':10} {'size':>10} {'sample ms':>10} {'stage ms':>9} {'share':>6}")
     for backend in backends.split(","):
@@ -62,6 +71,10 @@ def main(n: int, backends: str, quality: str) -> None:
             size = f"{resolution[0]}x{resolution[1]}"
             print(f"{backend:8} {camera:10} {size:>10} {sample_ms:10.0f} {stage_ms:9.1f} "
                   f"{100 * stage_ms / sample_ms:5.1f}%")  # fmt: skip
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

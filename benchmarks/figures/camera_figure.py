@@ -1,7 +1,8 @@
 """Draw docs/camera_presets.jpg: one scene through the ideal, default and speedplus cameras, and the
 default camera once more with the sun in view (ghosts, veiling glare and bloom over the target).
 
-    python docs/camera_figure.py [--backend blender] [--seed 3] [--index 0] [--out docs/camera_presets.jpg]
+    python benchmarks/figures/camera_figure.py [--backend blender] [--seed 3] [--index 0]
+        [--out docs/camera_presets.jpg]
 
 The scene (pose, distance, sun, background, props) is sample INDEX of SEED under the default camera;
 each panel keeps it and swaps only the camera (intrinsics, lens, and that camera's own draws).
@@ -9,14 +10,18 @@ each panel keeps it and swaps only the camera (intrinsics, lens, and that camera
 
 from __future__ import annotations
 
+import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
 
-import click
 import cv2
 import numpy as np
 
-from scgen.generator import Generator
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import ROOT, parser, run_script
+
+from scgen import Generator
 from scgen.scenes import load_config
 from scgen.scenes.camera_config import CameraSettings
 from scgen.scenes.imaging import sample_imaging
@@ -63,14 +68,22 @@ def _panel(image: np.ndarray, label: str) -> np.ndarray:
     return bgr
 
 
-@click.command()
-@click.option("--backend", default="blender", show_default=True)
-@click.option("--seed", type=int, default=3, show_default=True)
-@click.option("--index", type=int, default=None, help="Default: the first sample with the target central.")
-@click.option("--out", type=click.Path(path_type=Path), default=Path("docs/camera_presets.jpg"),
-              show_default=True)  # fmt: skip
-def main(backend: str, seed: int, index: int, out: Path) -> None:
-    with Generator.load(seed=seed, backend=backend, camera="ideal") as gen:
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
+    ap.add_argument("--backend", default="blender", help="[blender]")
+    ap.add_argument("--seed", type=int, default=3, help="[3]")
+    ap.add_argument(
+        "--index", type=int, default=None, help="Default: the first sample with the target central."
+    )
+    ap.add_argument(
+        "--out", type=Path, default=ROOT / "docs" / "camera_presets.jpg", help="[docs/camera_presets.jpg]"
+    )
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
+    index, out = args.index, args.out
+    with Generator.load(seed=args.seed, backend=args.backend, camera="ideal") as gen:
         index = next(i for i in range(1000) if _central(gen.scene(i))) if index is None else index
         base = gen.scene(index)
         views = [
@@ -88,7 +101,11 @@ def main(backend: str, seed: int, index: int, out: Path) -> None:
     grid = np.vstack([np.hstack(panels[:2]), np.hstack(panels[2:])])
     out.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(out), grid, [cv2.IMWRITE_JPEG_QUALITY, 92])
-    click.echo(f"wrote {out}")
+    print(f"wrote {out}")
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

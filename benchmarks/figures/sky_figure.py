@@ -1,6 +1,6 @@
 """Draw docs/real_sky.jpg (issue 30): real renders through the ideal camera, three rows of four panels.
 
-    python docs/sky_figure.py [--backend mitsuba] [--quality default] [--out docs/real_sky.jpg]
+    python benchmarks/figures/sky_figure.py [--backend mitsuba] [--quality default] [--out docs/real_sky.jpg]
 
 1. The Blue Marble Earth: two low-orbit limbs and two distant discs (samples of seed 1 with an Earth).
 2. The Hipparcos sky behind the target: one scene at the true star brightness (black, as in flight
@@ -10,14 +10,18 @@
 
 from __future__ import annotations
 
+import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
 
-import click
 import cv2
 import numpy as np
 
-from scgen.generator import Generator
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import ROOT, parser, run_script
+
+from scgen import Generator
 from scgen.scenes.finish import finish_group, sample_finish
 from scgen.scenes.rng import factor_rng
 
@@ -75,15 +79,23 @@ def finish_row(render: dict) -> list[np.ndarray]:
     return panels
 
 
-@click.command()
-@click.option("--backend", default="mitsuba")
-@click.option("--quality", default="default")
-@click.option("--out", type=click.Path(path_type=Path), default=Path("docs/real_sky.jpg"))
-def main(backend: str, quality: str, out: Path) -> None:
-    render = {"backend": backend, "quality": quality}
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
+    ap.add_argument("--backend", default="mitsuba", help="[mitsuba]")
+    ap.add_argument("--quality", default="default", help="[default]")
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "real_sky.jpg", help="[docs/real_sky.jpg]")
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
+    render = {"backend": args.backend, "quality": args.quality}
     rows = [np.concatenate(row(render), axis=1) for row in (earth_row, stars_row, finish_row)]
-    cv2.imwrite(str(out), np.concatenate(rows, axis=0)[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 90])
-    print(f"wrote {out}")
+    cv2.imwrite(str(args.out), np.concatenate(rows, axis=0)[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 90])
+    print(f"wrote {args.out}")
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

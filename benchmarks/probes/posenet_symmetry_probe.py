@@ -13,7 +13,7 @@ the batch's best constant (per-channel median), so a ratio of 1.0 means nothing 
 - tinted: real targets, but the input image's visible pixels are tinted by the sign of their x, y, z,
   a local cue that breaks the symmetry pixel by pixel (not a rendering: a diagnostic input).
 
-    python benchmarks/posenet_symmetry_probe.py --data DS [--subset 64 --steps 400]
+    python benchmarks/probes/posenet_symmetry_probe.py --data DS [--subset 64 --steps 400]
 
 If folded and tinted learn while signed does not, the plateau is the symmetry, not the gradient path.
 """
@@ -21,6 +21,7 @@ If folded and tinted learn while signed does not, the plateau is the symmetry, n
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -30,10 +31,13 @@ import torch
 import torch.nn.functional as F
 from torch.utils.data import DataLoader
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import parser, run_script
+
 from posenet.config import load_config
 from posenet.data import EpochSampler, open_split
 from posenet.models import create_model
-from posenet.train import (
+from posenet.training.train import (
     make_optimizer,
     pin_cpu_threads,
     pm_loss_points,
@@ -109,13 +113,16 @@ def run_arm(
     return rows
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, required=True, help="an scgen dataset (its train split is used)")
-    parser.add_argument("--subset", type=int, default=64, help="first N training instances")
-    parser.add_argument("--steps", type=int, default=400)
-    parser.add_argument("--arms", default=",".join(ARMS), help="comma-separated subset of " + ", ".join(ARMS))
-    args = parser.parse_args()
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
+    ap.add_argument("--data", type=Path, required=True, help="an scgen dataset (its train split is used)")
+    ap.add_argument("--subset", type=int, default=64, help="first N training instances")
+    ap.add_argument("--steps", type=int, default=400)
+    ap.add_argument("--arms", default=",".join(ARMS), help="comma-separated subset of " + ", ".join(ARMS))
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     pin_cpu_threads(0)
     every = max(1, args.steps // 8)
     results = {}
@@ -128,6 +135,10 @@ def main() -> None:
     for i, (step, *_) in enumerate(next(iter(results.values()))):
         cells = [f"{c:.3f}/{k:.3f} {c / k:.2f}" for c, k in (rows[i][1:] for rows in results.values())]
         print(f"{step:>4}  " + "  ".join(f"{cell:>16}" for cell in cells))
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Draw docs/camera_before_after.jpg: the same samples rendered with the code at another revision and
 with this tree, side by side, and print the two renders' over-exposure and factor-group tables.
 
-    python benchmarks/camera_before_after.py --before b970dd6 [--seed 7] [--ids 15 75 ...]
+    python benchmarks/figures/camera_before_after.py --before b970dd6 [--seed 7] [--ids 15 75 ...]
         [--resolution 640x480] [--backend mitsuba] [--out docs/camera_before_after.jpg]
         [--tables BEFORE_DIR AFTER_DIR]
 
@@ -25,7 +25,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from same_output import ROOT, revision_tree
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import ROOT, parse_resolution, parser, revision_tree, run_script
 
 # seed 7: the most clipped before (earth, cluttered), the sun near the view, complex skies, nominal finishes
 IDS = (1098, 2109, 576, 15, 535, 1820, 75, 180, 347, 386, 2, 4, 6, 3, 31, 74)
@@ -55,8 +57,9 @@ def dump(out: Path, seed: int, ids: list[int], resolution: tuple[int, int], back
 
 def render_with(code: Path, out: Path, args: argparse.Namespace) -> None:
     """This script's `--dump` in a child process whose scgen comes from `code`."""
-    command = [sys.executable, __file__, "--dump", str(out), "--seed", str(args.seed), "--resolution",
-               args.resolution, "--backend", args.backend, "--ids", *map(str, args.ids)]  # fmt: skip
+    size = "x".join(map(str, args.resolution))
+    command = [sys.executable, __file__, "--dump", str(out), "--seed", str(args.seed), "--resolution", size,
+               "--backend", args.backend, "--ids", *map(str, args.ids)]  # fmt: skip
     subprocess.run(command, env={**os.environ, "PYTHONPATH": str(code)}, cwd=code, check=True)
 
 
@@ -98,20 +101,22 @@ def tables(before: Path, after: Path) -> None:
             print(f"| {factor} {value} | {counts[0]} | {counts[1]} |")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--before", help="git revision of the code before")
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--ids", type=int, nargs="+", default=list(IDS))
-    ap.add_argument("--resolution", default="640x480")
+    ap.add_argument("--resolution", type=parse_resolution, default=(640, 480), help="WxH [640x480]")
     ap.add_argument("--backend", default="mitsuba")
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "camera_before_after.jpg")
     ap.add_argument("--tables", type=Path, nargs=2, metavar=("BEFORE_DIR", "AFTER_DIR"))
     ap.add_argument("--dump", type=Path, help=argparse.SUPPRESS)
-    args = ap.parse_args()
-    resolution = tuple(int(v) for v in args.resolution.split("x"))
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     if args.dump:
-        dump(args.dump, args.seed, args.ids, resolution, args.backend)
+        dump(args.dump, args.seed, args.ids, args.resolution, args.backend)
         return
     if args.tables:
         tables(*args.tables)
@@ -123,6 +128,10 @@ def main() -> None:
         figure = grid(tmp / "before", tmp / "after", args.ids, args.before[:7])
     cv2.imwrite(str(args.out), figure, [cv2.IMWRITE_JPEG_QUALITY, 88])
     print(f"wrote {args.out} ({figure.shape[1]}x{figure.shape[0]})")
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """RGB file formats side by side on the same images: bytes per image and what JPEG loses.
 
-Usage: python benchmarks/image_format.py [--n 24] [--seed 0] [--resolution 640x480] [--backend mitsuba]
+Usage: python benchmarks/probes/image_format.py [--n 24] [--seed 0] [--resolution 640x480] [--backend mitsuba]
        [--camera default] [--qualities 85 90 95]
 
 Renders samples 0..N-1 in memory as `scgen render` would (default camera: sensor noise, PSF, drawn
@@ -14,12 +14,17 @@ image over the whole frame and over the target's visible pixels.
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import cv2
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import parser, run_script
+
+from scgen import Generator
 from scgen.dataset.writer import drawn_jpeg_quality, encode_rgb
-from scgen.generator import Generator
 
 FULL_COUNT = 50_000
 
@@ -34,15 +39,18 @@ def decode(data: bytes) -> np.ndarray:
     return bgr[..., ::-1] if bgr.ndim == 3 else bgr
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--n", type=int, default=24)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--resolution", default="640x480")
     ap.add_argument("--backend", default="mitsuba")
     ap.add_argument("--camera", default="default")
     ap.add_argument("--qualities", type=int, nargs="+", default=[85, 90, 95])
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     resolution = tuple(int(v) for v in args.resolution.split("x"))
     formats = ["png", *(f"jpg q{q}" for q in args.qualities), "jpg as drawn"]
     sizes: dict[str, list[int]] = {f: [] for f in formats}
@@ -75,6 +83,10 @@ def main() -> None:
             row += [np.median(frame[name]), np.median(target[name])]
         print(f"{name:<14}" + "".join(f"{v:>12.1f}" for v in row))
     print("PSNR: median over images, dB against the lossless image (8-bit)")
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -2,19 +2,23 @@
 
 Times `posenet.detection.train.detector_step` (FCOS forward with its losses, backward, Ranger step) of
 --config on one fixed batch of the dataset's training images, augmented as training augments them, on
-the current device. The weights are laid out as training lays them out (posenet.train.memory_format:
+the current device. The weights are laid out as training lays them out (posenet.training.train.memory_format:
 channels-last on a CPU) and, on a CPU, also in the default contiguous format.
 
-Usage: python benchmarks/detector_step.py --data DIR [--config cpu] [--steps 20]
+Usage: python benchmarks/probes/detector_step.py --data DIR [--config cpu] [--steps 20]
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import parser, run_script
 
 from posenet.detection.detector import (
     DetectionDataset,
@@ -25,7 +29,7 @@ from posenet.detection.detector import (
     load_detector_config,
 )
 from posenet.detection.train import detector_step
-from posenet.train import compared_layouts, make_optimizer, pin_cpu_threads
+from posenet.training.train import compared_layouts, make_optimizer, pin_cpu_threads
 
 WARMUP = 3  # untimed steps (allocator, oneDNN kernel selection)
 
@@ -49,12 +53,15 @@ def step_time(
     return sum(times[WARMUP:]) / steps
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args() -> argparse.Namespace:
+    ap = parser(__doc__)
     ap.add_argument("--data", type=Path, required=True, help="An scgen dataset with a train split.")
     ap.add_argument("--config", default="cpu", help="cpu | paper | a detector config file [cpu].")
     ap.add_argument("--steps", type=int, default=20, help="Timed steps per layout.")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run(args: argparse.Namespace) -> None:
     cfg = load_detector_config(args.config)
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if device.type == "cpu":
@@ -63,6 +70,10 @@ def main() -> None:
     for layout, what in compared_layouts(device):
         sec = step_time(args.data, cfg, args.steps, layout, device)
         print(f"detector train step ({args.config}, batch {bs}, {device.type}, {what}): {1e3 * sec:.0f} ms")
+
+
+def main() -> None:
+    run_script(run, parse_args())
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """posenet accuracy against data: the CPU recipe at equal compute on nested training sets, one test set.
 
-    python benchmarks/posenet_data_curve.py --out /tmp/curve
+    python benchmarks/figures/posenet_data_curve.py --out /tmp/curve
 
 Renders one large set with the learning benchmark's settings (Mitsuba, 320x240, seed 7, the default
 camera, uniform SO(3) attitudes; 30,000 samples: 21,000 / 3,000 / 6,000 by factor combinations) into
@@ -20,30 +20,31 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from posenet_learning import BACKEND, RESOLUTION, SEED, WORKERS, run_script, schedule
-from scipy.optimize import brentq
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
+from harness import BACKEND, RESOLUTION, SEED, WORKERS, parser, pyplot, run_script
+from harness.pose import CHANCE_RE_DEG, schedule
+
+from posenet import evaluate, train
 from posenet.config import load_config
 from posenet.data.dataset import first_images
 from posenet.data.layout import scan_split
-from posenet.evaluate import evaluate
-from posenet.train import LAST, train
+from posenet.training.train import LAST
 from scgen.io.atomic import atomic_write_text
 from scgen.run.runner import RenderJob, run_render
 
 N, SIZES, TEST_N, STEPS = 30000, (700, 2100, 7000, 21000), 1000, 10440
 PAPER_TRAIN_IMAGES = 35000  # the paper's training set (35,000 images at 640x480, 300 epochs)
-# the median rotation error of a guess uniform over SO(3): the angle's CDF is (t - sin t) / pi
-CHANCE_RE_DEG = float(np.rad2deg(brentq(lambda t: t - np.sin(t) - np.pi / 2, 0.0, np.pi)))
 FIGURES = ("re_deg_median", "add_0.1d", "add_rot_0.1d", "te_0.1d", "turned", "tz_rel_median", "te_m_median")
 
 
 def parse_args() -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = parser(__doc__)
     ap.add_argument("--out", type=Path, required=True, help="Output folder: data/, run-N/, curve.json, PNG.")
     ap.add_argument("--n", type=int, default=N, help="Samples to render [%(default)s].")
     ap.add_argument(
@@ -86,11 +87,7 @@ def train_point(data: Path, out: Path, size: int, steps: int) -> Path:
 
 
 def plot(path: Path, points: list[dict[str, Any]], test_n: int, steps: int) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     x = [p["train_images"] for p in points]
     fig, ax = plt.subplots(figsize=(8, 5))
     ax.plot(
