@@ -38,8 +38,8 @@ from posenet.predict.ransac import PNP_LABELS, PNP_METHODS
 from posenet.predict.run import FORMATS as PREDICT_FORMATS
 from posenet.predict.run import run_predict
 from posenet.training.train import train as run_train
-from scgen.cli import one_line_errors, preset_intrinsics
-from scgen.io import ScgenError, bop, check_output, make_output_folder, write_output
+from scgen.cli import one_line_errors
+from scgen.io import ScgenError, bop, check_output, make_output_folder, preset_intrinsics, write_output
 
 PATH = click.Path(path_type=Path)
 

@@ -15,8 +15,7 @@ from scgen.dataset.export import FORMATS as EXPORT_FORMATS
 from scgen.dataset.export.output import IMAGE_MODES
 from scgen.dataset.layout import RGB_FORMATS
 from scgen.errors import ScgenError
-from scgen.scenes.camera_config import CAMERA_PRESETS
-from scgen.scenes.camera_config import preset_intrinsics as preset_intrinsics  # posenet predict --camera NAME
+from scgen.io.camera_presets import CAMERA_PRESETS
 from scgen.scenes.factors import FACTOR_GROUPS
 
 

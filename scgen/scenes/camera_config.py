@@ -1,10 +1,11 @@
 """The camera's settings: intrinsics, lens, exposure, optics, glare, sensor, output.
 
-`CameraSettings` and its section dataclasses are the one home of every key, its default and its unit;
-the config's built-in `camera` section (`DEFAULT_CAMERA`) is their table. One table of presets
-(`CAMERA_PRESETS`): each entry overrides the `default` camera. A config's table is checked once at load
-(`check_camera`) and travels typed with each image (ImagingSpec.camera) to the camera stage. Ranges are
-[min, max] drawn uniformly per image (the gain log-uniformly).
+`CameraSettings` and its section dataclasses are the one home of every key, its default and its unit
+(the default geometry comes from scgen.io.camera_presets); the config's built-in `camera` section
+(`DEFAULT_CAMERA`) is their table. One table of presets (`CAMERA_PRESETS`, in scgen.io.camera_presets,
+where posenet reads their intrinsics): each entry overrides the `default` camera. A config's table is
+checked once at load (`check_camera`) and travels typed with each image (ImagingSpec.camera) to the
+camera stage. Ranges are [min, max] drawn uniformly per image (the gain log-uniformly).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from scgen.errors import ScgenError
+from scgen.io.camera_presets import DEFAULT_INTRINSICS, preset_entry
 from scgen.scenes.checks import check_choice, check_positive, check_prob, check_range
 
 Range = tuple[float, float]  # [min, max], drawn uniformly per image
@@ -98,13 +100,13 @@ class CameraSettings:
     """
 
     preset: str = "default"
-    width: int = 640  # px
-    height: int = 480  # px
-    fx: float = 600.0  # px
-    fy: float = 600.0  # px
-    cx: float | None = None  # px; None: (width - 1) / 2, the image centre under the pixel-centre convention
-    cy: float | None = None  # px
-    dist: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)  # OpenCV k1, k2, p1, p2, k3 (normalised coordinates)
+    width: int = DEFAULT_INTRINSICS["width"]  # px
+    height: int = DEFAULT_INTRINSICS["height"]  # px
+    fx: float = DEFAULT_INTRINSICS["fx"]  # px
+    fy: float = DEFAULT_INTRINSICS["fy"]  # px
+    cx: float | None = DEFAULT_INTRINSICS["cx"]  # px; None: (width - 1) / 2, the image centre
+    cy: float | None = DEFAULT_INTRINSICS["cy"]  # px
+    dist: tuple[float, ...] = DEFAULT_INTRINSICS["dist"]  # OpenCV k1, k2, p1, p2, k3 (normalised coordinates)
     exposure_ev: float = 0.0  # base exposure (EV); +1 EV halves every image value
     exposure: ExposureSettings = field(default_factory=ExposureSettings)
     optics: OpticsSettings = field(default_factory=OpticsSettings)
@@ -142,45 +144,14 @@ def _listed(value: Any) -> Any:
 
 DEFAULT_CAMERA: dict[str, Any] = CameraSettings().table()
 
-CAMERA_PRESETS: dict[str, dict[str, Any]] = {
-    "ideal": {  # the images before the camera stage: a perfect pinhole camera at a fixed exposure
-        "exposure": {"mode": "fixed"},
-        "optics": {
-            "psf_fwhm_px": [0.0, 0.0],
-            "motion_blur_prob": 0.0,
-            "vignetting": [0.0, 0.0],
-            "chromatic_px": [0.0, 0.0],
-        },  # fmt: skip
-        "glare": {"blooming": False, "bloom": 0.0, "flare": False},
-        "sensor": {"enabled": False},
-        "output": {"jpeg_quality": [95, 95]},
-    },
-    "default": {},  # a machine-vision CMOS camera (anti-blooming drains) at 640x480, 56 deg field of view
-    "ccd": {  # the default camera on a CCD without anti-blooming drains: full wells spill along columns
-        "glare": {"blooming": True},
-    },
-    "speedplus": {  # SPEED+'s camera (1920x1200, calibrated K and distortion, monochrome), IMX174-like sensor
-        "width": 1920,
-        "height": 1200,
-        "fx": 2988.5795,
-        "fy": 2988.3401,
-        "cx": 960.0,
-        "cy": 600.0,
-        "dist": [-0.22383, 0.51410, -0.00066, -0.00021, -0.13124],
-        "optics": {"psf_fwhm_px": [1.8, 2.8], "motion_blur_px": [1.0, 6.0], "chromatic_px": [0.0, 0.0]},
-        "sensor": {"full_well_e": 32000.0, "read_noise_e": 7.0, "gain": [1.0, 8.0]},
-        "output": {"mono": True, "jpeg_quality": [80, 95]},
-    },
-}
 PX_RANGES = (("optics", "psf_fwhm_px"), ("optics", "motion_blur_px"), ("optics", "chromatic_px"))
 
 
 def camera_preset(name: str) -> dict[str, Any]:
     """The full camera table of a preset (a deep copy of the default with the preset's entry over it)."""
-    if name not in CAMERA_PRESETS:
-        raise ScgenError(f"unknown camera preset '{name}' (choose from {', '.join(CAMERA_PRESETS)})")
+    entry = preset_entry(name)
     table = copy.deepcopy(DEFAULT_CAMERA)
-    for key, value in CAMERA_PRESETS[name].items():
+    for key, value in entry.items():
         if isinstance(value, dict):
             table[key].update(copy.deepcopy(value))
         else:
@@ -241,14 +212,3 @@ def check_camera(cam: dict[str, Any]) -> None:
     check_range("camera.output.jpeg_quality", q, 1)
     if q[1] > 100:
         raise ScgenError(f"camera.output.jpeg_quality must lie in [1, 100], got {q}")
-
-
-def preset_intrinsics(name: str) -> tuple[list[list[float]], list[float], tuple[int, int]]:
-    """(K, OpenCV distortion, (width, height)) of a preset's camera: what a pose predictor needs to read
-    images taken by it (`posenet predict --camera speedplus`)."""
-    cam = camera_preset(name)
-    w, h = int(cam["width"]), int(cam["height"])
-    cx = (w - 1) / 2 if cam["cx"] is None else float(cam["cx"])
-    cy = (h - 1) / 2 if cam["cy"] is None else float(cam["cy"])
-    K = [[float(cam["fx"]), 0.0, cx], [0.0, float(cam["fy"]), cy], [0.0, 0.0, 1.0]]
-    return K, [float(k) for k in cam.get("dist") or []], (w, h)
