@@ -12,6 +12,7 @@ import cv2
 import torch
 from tqdm import tqdm
 
+from clishell.group import OneLineErrorGroup
 from posenet.checkpoint import load_checkpoint, load_model
 from posenet.config import AMP_MODES, config_from_dict, load_config
 from posenet.data.boxes import boxes_from_gt
@@ -19,6 +20,7 @@ from posenet.data.layout import scan_split
 from posenet.detection.detect import detect_split, detection_entries
 from posenet.detection.detector import load_detector_config
 from posenet.detection.train import BEST, train_detector
+from posenet.doctor import check_config_packages
 from posenet.errors import PosenetError
 from posenet.evaluation.evaluate import (
     BATCH_SIZE,
@@ -38,8 +40,7 @@ from posenet.predict.ransac import PNP_LABELS, PNP_METHODS
 from posenet.predict.run import FORMATS as PREDICT_FORMATS
 from posenet.predict.run import run_predict
 from posenet.training.train import train as run_train
-from scgen.cli import one_line_errors
-from scgen.io import ScgenError, bop, check_output, make_output_folder, preset_intrinsics, write_output
+from scgen.io import bop, check_output, make_output_folder, preset_intrinsics, write_output
 
 PATH = click.Path(path_type=Path)
 
@@ -53,7 +54,7 @@ minutes_option = click.option(
 )
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=OneLineErrorGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="scgen", prog_name="posenet")  # one distribution holds both packages
 def main() -> None:
     """posenet: GDR-Net / GAP-GDRNet 6D pose networks trained and evaluated on scgen (BOP-layout) datasets."""
@@ -92,7 +93,6 @@ def main() -> None:
     help=f"Mixed precision, overriding optim.amp: {' | '.join(AMP_MODES)} (auto: bf16 on a CUDA GPU that "
     "has it, else float32).",  # checked with the config: a bad value is one line, as every other
 )
-@one_line_errors(PosenetError, ScgenError)
 def train(
     data: Path,
     out: Path,
@@ -110,6 +110,7 @@ def train(
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "paper"
     cfg = load_config(config, variant=variant, epochs=epochs, obj_id=obj_id, amp=amp)
+    check_config_packages(cfg)
     ckpt = run_train(data, out, cfg, resume=resume, max_steps=max_steps, minutes=minutes)
     if os.environ.get("RANK", "0") == "0":  # torchrun: one line, not one per process
         click.echo(f"checkpoint: {ckpt}")
@@ -154,7 +155,6 @@ def train(
     help="Pose solver: the network's Patch-PnP, OpenCV's PnP-RANSAC on its predicted xyz and mask, or both.",
 )
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json, --predictions or --bop-csv.")
-@one_line_errors(PosenetError, ScgenError)
 def eval_cmd(
     data: Path,
     ckpt: tuple[Path, ...],
@@ -236,7 +236,6 @@ def eval_cmd(
 @minutes_option
 @click.option("--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config).")
 @click.option("--obj-id", type=click.IntRange(min=1), default=None, help="Object to detect [default: 1].")
-@one_line_errors(PosenetError, ScgenError)
 def train_detector_cmd(
     data: Path,
     out: Path,
@@ -273,7 +272,6 @@ def train_detector_cmd(
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--obj-id", type=click.IntRange(min=1), default=1, show_default=True, help="Object to box.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --out.")
-@one_line_errors(PosenetError, ScgenError)
 def boxes(
     data: Path,
     out: Path,
@@ -321,7 +319,6 @@ def boxes(
     "--onnx", is_flag=True, help="Also export each variant to ONNX and time it in onnxruntime (CPU)."
 )
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json.")
-@one_line_errors(PosenetError, ScgenError)
 def bench(
     variants: tuple[str, ...],
     device: str,
@@ -355,7 +352,6 @@ def bench(
 @click.option("--detector", type=PATH, default=None, help="Also a detector checkpoint, for posenet predict.")
 @click.option("--detector-onnx", type=PATH, default=None, help="Where --detector's graph goes.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --onnx file.")
-@one_line_errors(PosenetError, ScgenError)
 def export_cmd(
     ckpt: Path, onnx_path: Path, detector: Path | None, detector_onnx: Path | None, overwrite: bool
 ) -> None:
@@ -419,7 +415,6 @@ def export_detector_graph(detector: Path, path: Path, pose_state: dict, ckpt: Pa
 @click.option("--split", default="test", show_default=True)
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="Folder for the PNGs.")
 @click.option("--overwrite", is_flag=True, help="Write into an existing, non-empty --out.")
-@one_line_errors(PosenetError, ScgenError)
 def viz(
     data: Path, ckpts: tuple[Path, ...], samples: str | None, split: str, out: Path, overwrite: bool
 ) -> None:
@@ -484,7 +479,6 @@ def viz(
     "--detector runs there too.",
 )
 @click.option("--overwrite", is_flag=True, help="Write into an existing, non-empty --out.")
-@one_line_errors(PosenetError, ScgenError)
 def predict(
     source: str | None,
     ckpt: Path,

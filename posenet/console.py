@@ -1,30 +1,25 @@
 """The `posenet` console script: one line naming the missing training packages, before the CLI imports them.
 
 posenet ships in the `scgen` distribution; a rendering node installed without the `train` extra has
-the command but not torch, and gets this line instead of an import traceback.
+the command but not torch, and gets this line instead of an import traceback. A package that only some
+configs need (albumentations, for the augmentation chains other than the paper's) is named when a config
+selects it (posenet.doctor.check_config_packages), so a node without it runs every other command.
 """
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 import time
 
 import posenet
-
-TRAINING_MODULES = ("torch", "torchvision", "timm", "albumentations", "tensorboard")
-INSTALL_HINT = "pip install 'scgen[train]'"
-
-
-def missing_training_modules() -> list[str]:
-    """The training stack's top-level modules that cannot be found here (none are imported)."""
-    return [m for m in TRAINING_MODULES if importlib.util.find_spec(m) is None]
+from clishell.group import exit_with
+from posenet.doctor import INSTALL_HINT, missing_training_modules
+from posenet.errors import PosenetError
 
 
 def main() -> None:
     missing = missing_training_modules()
     if missing:
-        sys.exit(f"Error: posenet needs {', '.join(missing)}, not installed here: {INSTALL_HINT}")
+        exit_with(PosenetError(f"posenet needs {', '.join(missing)}, not installed here: {INSTALL_HINT}"))
     tic = time.perf_counter()
     from posenet.cli import main as cli
 

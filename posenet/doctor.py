@@ -1,8 +1,10 @@
-"""posenet's line in `scgen doctor`: whether the default `posenet train` can get its backbone's weights.
+"""What this machine has for posenet: the packages every command needs (the console's guard), those a
+given config needs (`check_config_packages`), and whether the default training can get its backbone's
+weights (`train_weights`, posenet's line in `scgen doctor`).
 
-Registered with the doctor as an entry point (pyproject.toml, group `scgen.doctor`), so that scgen reads
-it without importing posenet. A check returns (verdict, detail, fix), verdict `ok` or `warn`; this module
-imports torch and timm only inside the check, after finding them installed.
+The weights check is registered with the doctor as an entry point (pyproject.toml, group `scgen.doctor`),
+so that scgen reads it without importing posenet; it returns (verdict, detail, fix), verdict `ok` or
+`warn`. Nothing here imports torch or timm before finding them installed.
 """
 
 from __future__ import annotations
@@ -12,10 +14,16 @@ import os
 import socket
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import urlparse
 
-from posenet.console import INSTALL_HINT
+from posenet.errors import PosenetError
 
+if TYPE_CHECKING:
+    from posenet.config import TrainConfig
+
+TRAINING_MODULES = ("torch", "torchvision", "timm", "tensorboard")  # what every posenet command imports
+INSTALL_HINT = "pip install 'scgen[train]'"
 # One TCP connect to the weights' host, at most this long: it says online or not without a request, where
 # timm's own download retries for ~50 s offline before its error.
 PROBE_S = 3.0
@@ -25,13 +33,27 @@ OFFLINE_FIX = (
 )
 
 
+def missing_training_modules() -> list[str]:
+    """The training stack's top-level modules that cannot be found here (none are imported)."""
+    return [m for m in TRAINING_MODULES if importlib.util.find_spec(m) is None]
+
+
+def check_config_packages(cfg: TrainConfig) -> None:
+    """Raise PosenetError naming the package and the config key when `cfg` selects something whose
+    package is not installed here: every data.augment chain but the paper's is albumentations'
+    (posenet.data.photometric, imported by the dataset only for those)."""
+    augment = cfg.data.augment
+    if augment != "paper" and importlib.util.find_spec("albumentations") is None:
+        raise PosenetError(f"data.augment: {augment} needs albumentations, not installed here: "
+                           f"{INSTALL_HINT} (or data.augment: paper, which needs none)")  # fmt: skip
+
+
 def train_weights() -> tuple[str, str, str]:
     """Whether the default `posenet train` (no --config: the paper preset) can get its backbone's initial
     weights here: cached, packaged, a local file, or online. Downloads nothing (see PROBE_S)."""
     if any(importlib.util.find_spec(name) is None for name in ("torch", "timm")):
         return "warn", "not checked: posenet needs torch and timm", INSTALL_HINT
     from posenet.config import TrainConfig
-    from posenet.errors import PosenetError
     from posenet.models.backbone import IMAGENET, PACKAGE, shipped_weights_file, timm_weights
 
     cfg = TrainConfig()

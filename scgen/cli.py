@@ -11,31 +11,13 @@ from typing import Any
 
 import click
 
+from clishell.group import OneLineErrorGroup
 from scgen.dataset.export import FORMATS as EXPORT_FORMATS
 from scgen.dataset.export.output import IMAGE_MODES
 from scgen.dataset.layout import RGB_FORMATS
 from scgen.errors import ScgenError
 from scgen.io.camera_presets import CAMERA_PRESETS
 from scgen.scenes.factors import FACTOR_GROUPS
-
-
-def one_line_errors(*errors: type[Exception]) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """Decorator for click commands: `errors` become click's one-line 'Error: ...' and exit status 1.
-
-    Shared by the scgen and posenet command lines (each passes its own input-error type).
-    """
-
-    def decorate(fn: Callable[..., Any]) -> Callable[..., Any]:
-        @functools.wraps(fn)
-        def wrapper(*args: Any, **kwargs: Any) -> Any:
-            try:
-                return fn(*args, **kwargs)
-            except errors as exc:
-                raise click.ClickException(str(exc)) from None
-
-        return wrapper
-
-    return decorate
 
 
 def parse_resolution(text: str | None) -> tuple[int, int] | None:
@@ -94,7 +76,6 @@ def sequence_preview(command: Callable[..., Any]) -> Callable[..., Any]:
     return option(wrapper)
 
 
-@one_line_errors(ScgenError)
 def _preview_sequence(sequence: int, out: Path, backend: str, seed: int, model_path: Path | None,
                       keep_scale: bool, config_path: Path | None, camera: str | None, resolution: str,
                       quality: str, overwrite: bool = False, **_: Any) -> None:  # fmt: skip
@@ -119,7 +100,7 @@ def _preview_sequence(sequence: int, out: Path, backend: str, seed: int, model_p
     click.echo(f"wrote {path} and {sheet.name} ({len(frames)} frames of sequence {sequence}, {backend})")
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=OneLineErrorGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="scgen", prog_name="scgen")
 def main() -> None:
     """scgen: dense-labelled synthetic 6D-pose datasets of one spacecraft (BOP layout + xyz maps)."""
@@ -189,7 +170,6 @@ def main() -> None:
     "--save-depth, the old opt-in, is kept as an alias of --depth.",
 )
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-@one_line_errors(ScgenError)
 def render(
     n,
     out,
@@ -251,7 +231,6 @@ def render(
 @click.option("--overwrite", is_flag=True, help="Replace the dataset's own masks and scene_gt_info.json.")
 @click.option("--xyz-dtype", type=click.Choice(["float16", "float32"]), default="float16", show_default=True)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-@one_line_errors(ScgenError)
 def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: bool, xyz_dtype: str,
              quiet: bool) -> None:  # fmt: skip
     """Label any BOP dataset: xyz maps of every scene_gt instance, masks and scene_gt_info where missing."""
@@ -275,7 +254,6 @@ def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: b
     "--workers", type=int, default=None, help="Processes checking scene folders (default: CPU cores)."
 )
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-@one_line_errors(ScgenError)
 def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
     """Re-check a dataset's invariants (files, masks, boxes, xyz reprojection) and print a verdict."""
     from scgen.dataset.validate import validate_dataset
@@ -286,7 +264,7 @@ def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
     if problems:
         for p in problems[:50]:
             click.echo(f"FAIL {p}")
-        raise click.ClickException(f"{dataset}: {len(problems)} problem(s) in {n} samples")
+        raise ScgenError(f"{dataset}: {len(problems)} problem(s) in {n} samples")
     click.echo(f"OK {dataset}: {n} samples pass every check")
 
 
@@ -327,7 +305,6 @@ def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
     help="Where --sample-groups writes (default DATASET/groups_SPLIT_nN_sS.json, replaced when there).",
 )
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json, --csv, --plots or --groups-out.")
-@one_line_errors(ScgenError)
 def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_groups, seed, groups_out,
           overwrite) -> None:  # fmt: skip
     """Group counts of the robustness factors (the help lists scgen.scenes.factors.FACTOR_GROUPS)."""
@@ -362,7 +339,6 @@ def stats(dataset, split, json_path, csv_path, plots_dir, min_group, sample_grou
 @main.command()
 @click.argument("out", type=click.Path(path_type=Path))
 @click.argument("shards", nargs=-1, required=True, type=click.Path(path_type=Path))
-@one_line_errors(ScgenError)
 def merge(out: Path, shards: tuple[Path, ...]) -> None:
     """Join shard outputs (same seed, config and model) into OUT, as if rendered in one run."""
     from scgen.dataset.layout import MANIFEST
@@ -407,7 +383,6 @@ def merge(out: Path, shards: tuple[Path, ...]) -> None:
     + " only: how the images get into OUT (default copy).",
 )
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-@one_line_errors(ScgenError)
 def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | None, quiet: bool) -> None:
     from scgen.dataset.export import export_dataset
 
@@ -424,7 +399,6 @@ def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | No
 @click.option("--quality", default="draft", show_default=True, help="draft | default | high.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing OUT/preview.png.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-@one_line_errors(ScgenError)
 def preview(out, n, backend, seed, model_path, keep_scale, config_path, camera, resolution, quality,
             overwrite, quiet) -> None:  # fmt: skip
     """Render n samples in memory, as render would, and write OUT/preview.png: RGB, masks, xyz, factors."""
@@ -453,7 +427,6 @@ def preview(out, n, backend, seed, model_path, keep_scale, config_path, camera, 
 
 @main.command()
 @click.option("--out", type=click.Path(path_type=Path), default=None, help="Also check its free space.")
-@one_line_errors(ScgenError)
 def doctor(out: Path | None) -> None:
     """Check what this machine can render and train with: one line per check, its verdict and the fix.
 

@@ -5,13 +5,18 @@ scgen.io.output_path).
 The Click groups are walked, so a new scgen or posenet command joins the matrix by being registered: it
 fails test_every_command_is_in_the_matrix until it has a SPECS entry (how to call it well) and, for the
 cases that cannot apply to it, a NOT_APPLICABLE entry with the reason. The datasets are tiny real renders
-(4 samples, 64x48, Mitsuba draft) and the checkpoints one-step runs, shared by the whole module.
+(4 samples, 64x48, Mitsuba draft) and the checkpoints one-step runs, shared by the whole module. Outputs
+where nothing can be written: /proc, and real tmpfs mounts (read-only; full; 64 KiB) where this machine
+lets the tests mount (as root), else those cases are skipped with the reason.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
+import subprocess
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,11 +25,14 @@ import click
 import pytest
 from click.testing import CliRunner
 
+from clishell.group import OneLineErrorGroup
 from posenet.cli import main as posenet_main
 from scgen.cli import main as scgen_main
 from scgen.run.runner import RenderJob, run_render
 
 GROUPS = {"scgen": scgen_main, "posenet": posenet_main}
+MOUNTED = ("read_only", "full_disk")  # the output cases that need a mount
+STORAGE = ("special_fs", *MOUNTED)  # an output where nothing can be written
 CASES = (
     "missing_parent",
     "under_file",
@@ -33,6 +41,7 @@ CASES = (
     "corrupt_image",
     "bad_config",
     "empty_folder",
+    *STORAGE,
 )
 POSE_CONFIG = """\
 preset: smoke
@@ -101,6 +110,8 @@ SPECS: dict[str, Spec] = {
 }
 
 NO_OUTPUT = "writes no file"
+IN_PLACE = "labels its dataset in place: no output path"
+NO_STORAGE = dict.fromkeys(STORAGE, NO_OUTPUT)
 NO_CHECKPOINT = "reads no checkpoint"
 NO_CONFIG = "takes no config file"
 NO_IMAGE = "decodes no image"
@@ -125,6 +136,7 @@ NOT_APPLICABLE: dict[str, dict[str, str]] = {
         "existing_output": NO_OUTPUT,
         "wrong_checkpoint": NO_CHECKPOINT,
         "bad_config": NO_CONFIG,
+        **NO_STORAGE,
     },
     "scgen merge": {
         "wrong_checkpoint": NO_CHECKPOINT,
@@ -133,12 +145,13 @@ NOT_APPLICABLE: dict[str, dict[str, str]] = {
     },
     "scgen export": {"wrong_checkpoint": NO_CHECKPOINT, "bad_config": NO_CONFIG},
     "scgen annotate": {
-        "missing_parent": "labels its dataset in place: no output path",
-        "under_file": "labels its dataset in place: no output path",
+        "missing_parent": IN_PLACE,
+        "under_file": IN_PLACE,
         "existing_output": "labels its dataset in place and resumes",
         "wrong_checkpoint": NO_CHECKPOINT,
         "corrupt_image": "labels by ray casting the models: decodes no RGB image",
         "bad_config": NO_CONFIG,
+        **{case: IN_PLACE + " (its input dataset, checked by the same rule)" for case in NO_STORAGE},
     },
     "scgen doctor": {
         case: "checks the machine: --out is only measured for free space, nothing is written or read"
@@ -184,6 +197,8 @@ def test_every_command_is_in_the_matrix():
     assert sorted(SPECS) == sorted(COMMANDS)
     assert sorted(NOT_APPLICABLE) == sorted(COMMANDS)
     assert all(set(cases) <= set(CASES) for cases in NOT_APPLICABLE.values())
+    # every command's errors become one line through its group, without a decorator of its own
+    assert all(isinstance(group, OneLineErrorGroup) for group in GROUPS.values())
 
 
 # --------------------------------------------------------------------------------------------- fixtures
@@ -247,6 +262,52 @@ def world(tmp_path_factory: pytest.TempPathFactory) -> World:
                  runs / "detector" / "best.pt", garbage, configs, test_id)  # fmt: skip
 
 
+@dataclass
+class Mounts:
+    """tmpfs file systems of 64 KiB: `read_only`; `full` (a file fills it: not one block free); `tiny`
+    (empty: room for a small file, not for a dataset's first files)."""
+
+    read_only: Path
+    full: Path
+    tiny: Path
+
+
+def fill(folder: Path) -> None:
+    """Write one file until the file system has no block left."""
+    fd = os.open(folder / "filler", os.O_WRONLY | os.O_CREAT)
+    try:
+        while True:
+            os.write(fd, bytes(4096))
+    except OSError as exc:
+        assert exc.errno == errno.ENOSPC, exc
+    finally:
+        os.close(fd)
+
+
+@pytest.fixture(scope="module")
+def mounts(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mounts]:
+    """Real mounts, unmounted afterwards; skipped, with the reason, where mounting is not permitted."""
+    root = tmp_path_factory.mktemp("mounts")
+    made: list[Path] = []
+    try:
+        for name, options in (("read_only", "ro,size=64k"), ("full", "size=64k"), ("tiny", "size=64k")):
+            (root / name).mkdir()
+            if shutil.which("mount") is None:
+                pytest.skip("no mount command here: the read-only and full-disk cases need a tmpfs")
+            done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(root / name)],
+                                  capture_output=True, text=True)  # fmt: skip
+            if done.returncode != 0:  # not root, or a container without CAP_SYS_ADMIN
+                pytest.skip(f"cannot mount a tmpfs here ({done.stderr.strip()}): the read-only and "
+                            "full-disk cases need one")  # fmt: skip
+            made.append(root / name)
+        fill(root / "full")
+        assert os.statvfs(root / "full").f_bavail == 0
+        yield Mounts(root / "read_only", root / "full", root / "tiny")
+    finally:
+        for folder in reversed(made):
+            subprocess.run(["umount", str(folder)], check=True)
+
+
 def snapshot(*roots: Path) -> dict[str, tuple]:
     """Every path under `roots` with its kind, size and modification time: what a failed command must
     leave as it was."""
@@ -300,11 +361,14 @@ def applies(command: str, case: str) -> None:
         pytest.skip(f"{command}: {reason}")
 
 
-def run_refused(command: str, argv: list[str], w: World, case_dir: Path, naming: str | None = None) -> str:
-    """Run `command` and assert_refused; its output."""
-    before = snapshot(w.root, case_dir)
+def run_refused(
+    command: str, argv: list[str], w: World, case_dir: Path, naming: str | None = None, *also: Path
+) -> str:
+    """Run `command` and assert_refused (nothing changed under the world, `case_dir` and `also`); its
+    output."""
+    before = snapshot(w.root, case_dir, *also)
     res = _invoke(command, argv)
-    return assert_refused(res, before, snapshot(w.root, case_dir), naming)
+    return assert_refused(res, before, snapshot(w.root, case_dir, *also), naming)
 
 
 # --------------------------------------------------------------------------------------------- the matrix
@@ -410,3 +474,73 @@ def test_an_empty_folder_is_refused(command: str, world: World, tmp_path: Path):
     empty = tmp_path / "inputs" / "empty"
     empty.mkdir(parents=True)
     run_refused(command, argv_for(spec, world, tmp_path, data=empty), world, tmp_path, "empty")
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_an_output_on_a_special_file_system_is_refused(command: str, world: World, tmp_path: Path):
+    """/proc holds no storage: mkdir there fails with ENOENT after any amount of work; refused first."""
+    applies(command, "special_fs")
+    spec = SPECS[command]
+    for name, kind in spec.outputs.items():
+        out = output_path(Path("/proc") / f"scgen_{tmp_path.name}", name, kind.split("/")[0])
+        run_refused(command, argv_for(spec, world, tmp_path, **{name: out}), world, tmp_path, str(out))
+        assert not out.exists()
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+@pytest.mark.parametrize("case", MOUNTED)
+def test_an_output_on_a_read_only_or_full_file_system_is_refused(
+    command: str, case: str, world: World, mounts: Mounts, tmp_path: Path
+):
+    """A read-only mount stops root too (chmod does not); a full one has not one block for a first file."""
+    applies(command, case)
+    spec = SPECS[command]
+    where = mounts.read_only if case == "read_only" else mounts.full
+    for name, kind in spec.outputs.items():
+        out = output_path(where / "new", name, kind.split("/")[0])
+        argv = argv_for(spec, world, tmp_path, **{name: out})
+        run_refused(command, argv, world, tmp_path, str(out), where)
+
+
+def test_a_disk_that_fills_during_the_work_is_one_line_naming_the_file(world: World, mounts: Mounts,
+                                                                        tmp_path: Path):  # fmt: skip
+    """64 KiB pass the check before work but cannot hold a dataset's static files (the target's models
+    alone are larger): the late OSError is one line naming the file that did not fit, and the new OUT is
+    removed again."""
+    out = mounts.tiny / "ds"
+    argv = argv_for(SPECS["scgen render"], world, tmp_path, out=out)
+    line = run_refused("scgen render", argv, world, tmp_path, str(out), mounts.tiny).splitlines()[-1]
+    assert "No space left on device" in line, line
+    assert list(mounts.tiny.iterdir()) == []
+
+
+# a node installed without albumentations: not found by find_spec, and not importable
+NO_ALBUMENTATIONS = """import sys
+sys.modules["albumentations"] = None
+from posenet.console import main
+sys.argv[0] = "posenet"
+main()
+"""
+
+
+def test_posenet_starts_without_the_optional_augmentation_package(world: World, tmp_path: Path):
+    """Only the albumentations chains need albumentations: the paper's chain trains without it, and a
+    config that selects another chain is one line naming the package and the config key, before work."""
+
+    def posenet(*argv: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", NO_ALBUMENTATIONS, *argv], capture_output=True,
+                              text=True, timeout=600)  # fmt: skip
+
+    spnv2 = tmp_path / "spnv2.yaml"
+    spnv2.write_text(POSE_CONFIG.replace("data: {workers: 0}", "data: {workers: 0, augment: spnv2}"))
+    before = snapshot(world.root, tmp_path)
+    done = posenet("train", *argv_for(SPECS["posenet train"], world, tmp_path, config=spnv2))
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        "Error: data.augment: spnv2 needs albumentations, not installed here: pip install 'scgen[train]' "
+        "(or data.augment: paper, which needs none)"
+    ]
+    assert snapshot(world.root, tmp_path) == before
+    done = posenet("train", *argv_for(SPECS["posenet train"], world, tmp_path))
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "fresh" / "out" / "last.pt").is_file()

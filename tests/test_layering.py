@@ -56,7 +56,8 @@ LAZY = {
 }  # `from scgen import Generator`
 POSENET_GATE = "scgen.io"  # the one module posenet reads scgen datasets through
 CLI_MODULES = {"scgen/cli.py", "posenet/cli.py", "posenet/console.py"}
-CLI_IMPORTS = {"click", "scgen.cli", "posenet.cli"}
+CLI_IMPORTS = {"click", "scgen.cli", "posenet.cli", "clishell.group"}
+PACKAGES = ("scgen", "posenet")
 
 
 def loaded_modules(*modules: str) -> set[str]:
@@ -98,13 +99,15 @@ def test_posenet_never_imports_a_renderer() -> None:
     assert renderer_modules(loaded_modules(*(module_name(ROOT, p) for p in paths))) == set()
 
 
-def test_posenet_loads_no_export_encoder() -> None:
-    """posenet's command line reaches scgen's export registry through scgen.cli; a GPU node that runs
-    posenet from a checkout carries what training reads, so importing every posenet module loads no
-    export encoder (pycocotools, imported where a COCO mask is encoded)."""
+def test_posenet_loads_no_more_of_scgen_than_scgen_io() -> None:
+    """A GPU node that runs posenet from a checkout carries what training reads: importing every posenet
+    module loads no scgen module that importing scgen.io does not (no export encoder and its pycocotools,
+    no sampling, no command line)."""
     paths = sorted(ROOT.glob("posenet/**/*.py"))
     loaded = loaded_modules(*(module_name(ROOT, p) for p in paths))
-    assert "scgen.dataset.export.coco" in loaded and "pycocotools" not in loaded
+    gate = loaded_modules(POSENET_GATE)
+    assert {m for m in loaded - gate if m.split(".")[0] == "scgen"} == set()
+    assert "pycocotools" not in loaded
 
 
 def imported_names(path: Path) -> set[str]:
@@ -221,19 +224,39 @@ def test_the_floor_check_sees_an_upward_import(tmp_path: Path) -> None:
 
 
 def test_posenet_reads_scgen_through_one_module() -> None:
-    """posenet imports scgen only through scgen.io (the BOP reader, atomic writes, EXR, images, the dataset
-    errors), and its command line scgen.cli's one-line errors."""
+    """posenet imports scgen only through scgen.io (the BOP reader, atomic writes, EXR, images, the camera
+    presets, the dataset errors), its command line included: the one-line errors are clishell's."""
     paths = sorted(ROOT.glob("posenet/**/*.py"))
     reached = {
         f"{p.relative_to(ROOT)}: {n}" for p in paths for n in imported_names(p) if n.split(".")[0] == "scgen"
     }
-    assert reached - {f"{p.relative_to(ROOT)}: {POSENET_GATE}" for p in paths} == {
-        "posenet/cli.py: scgen.cli"
+    assert reached - {f"{p.relative_to(ROOT)}: {POSENET_GATE}" for p in paths} == set()
+
+
+def test_scgen_never_imports_posenet() -> None:
+    """No arrow from scgen up into posenet, at any depth: the doctor reads posenet's training check from
+    the entry points posenet registers (scgen.doctor.CHECK_GROUP)."""
+    paths = sorted(ROOT.glob("scgen/**/*.py"))
+    reached = {
+        f"{p.relative_to(ROOT)}: {n}"
+        for p in paths
+        for n in imported_names(p)
+        if n.split(".")[0] == "posenet"
     }
+    assert reached == set()
+
+
+def test_the_shell_belongs_to_neither_package() -> None:
+    """clishell imports neither scgen nor posenet, and its errors module nothing at all: scgen's bottom
+    floor derives ScgenError from it."""
+    paths = sorted(ROOT.glob("clishell/*.py"))
+    reached = {f"{p.name}: {n}" for p in paths for n in imported_names(p) if n.split(".")[0] in PACKAGES}
+    assert paths and reached == set()
+    assert imported_names(ROOT / "clishell" / "errors.py") == set()
 
 
 def test_no_import_cycles() -> None:
-    assert import_cycle(ROOT, ("scgen", "posenet")) == []
+    assert import_cycle(ROOT, (*PACKAGES, "clishell")) == []
 
 
 def test_the_cycle_finder_sees_a_cycle_through_a_lazy_import(tmp_path: Path) -> None:
