@@ -34,6 +34,7 @@ from scgen.render.conventions import check_quality
 from scgen.run.executors import run_local, run_ray
 from scgen.run.worker import Done, Task, WorkerSettings
 from scgen.scenes.factors import spec_key
+from scgen.scenes.lens import is_pinhole
 from scgen.scenes.motion.sequence import is_sequence
 from scgen.scenes.spec import SceneSpec
 
@@ -179,6 +180,8 @@ def write_static_files(layout: Layout, generator: Generator, farthest_m: float |
     depth_scale = dataset_depth_scale(generator.cfg, generator.model, farthest_m)
     camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
               "height": cam["height"], "depth_scale": depth_scale}  # fmt: skip
+    if not is_pinhole(tuple(cam["dist"])):  # the lens, as each image's scene_camera entry has it
+        camera["cam_dist"] = [float(k) for k in cam["dist"]]
     atomic_write_text(layout.camera_path, dumps(camera))
     atomic_write_text(layout.config_path, dumps(generator.cfg))
     write_model_dir(generator.model, layout.models_dir, OBJ_ID)
