@@ -9,9 +9,8 @@ the object are copied, renamed, into OUT/NAME/input with the dataset's camera.js
 `posenet predict` runs on that folder with the detector, in torch and (after `posenet export` of both
 networks) in onnxruntime. Each written prediction is scored against its label: rotation median, ADD@0.1d
 (posenet.evaluation.metrics), and the detector's IoU against bbox_visib; beside it, `posenet eval` at the
-ground-truth
-boxes. predict's own images per second (the batch, model loading excluded) are read from its output.
-With --scale S the user's copies are the images resized S times (bicubic) with camera.json's
+ground-truth boxes. predict's own images per second (the batch, model loading excluded) are read from its
+output. With --scale S the user's copies are the images resized S times (bicubic) with camera.json's
 intrinsics scaled alike (posenet.data.camera.resized): a user camera of S times the size, which
 predict warps back into the training camera; the labels and the poses do not change.
 Writes OUT/report.json and prints one table. The goal of issue 50: ADD@0.1d at detected boxes within 3
