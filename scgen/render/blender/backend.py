@@ -2,7 +2,9 @@
 
 Per sample: update the persistent scenes in place (scene), render the anti-aliased beauty
 image (RGB + depth + object index from the centred first sample), then a one-sample aux render
-(normals, sun visibility, target-alone depth), and turn the passes into Buffers (pure numpy).
+(normals, sun visibility, target-alone depth), and turn the passes into Buffers (pure numpy). Both
+renders trace only the region the objects may cover (scgen.render.region): outside it every pass is
+what a pixel that meets nothing gives, so labels and the undenoised image are the full frame's exactly.
 bpy is imported only when a backend is made, so scgen works without it for other backends.
 """
 
@@ -20,8 +22,10 @@ import numpy as np
 from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.blender.env import import_bpy, select_device
 from scgen.render.blender.scene import ALONE, BEAUTY, PROBE, BlenderScene
-from scgen.render.blender.settings import preset
+from scgen.render.blender.settings import FILTER_WIDTH_PX, preset
 from scgen.render.camera import record_image, render_camera
+from scgen.render.props import prop_mesh
+from scgen.render.region import Region, covered_region, full_frame, region_render
 from scgen.render.sky.backgrounds import background_image
 from scgen.scenes.geometry import project
 from scgen.scenes.model import TargetModel
@@ -31,6 +35,7 @@ if TYPE_CHECKING:
     from scgen.render.mitsuba.backend import MitsubaBackend
 
 GRAZING = 1e-4  # |n.s| below this: the surface is edge-on to the sun, its visibility is not measured
+DENOISE_MARGIN_PX = 16  # empty pixels kept around the objects: the denoiser's view of their surroundings
 
 
 class BlenderBackend:
@@ -39,9 +44,16 @@ class BlenderBackend:
     name = "blender"
 
     def __init__(
-        self, model: TargetModel, quality: str = "default", device: str = "auto", threads: int | None = None
+        self,
+        model: TargetModel,
+        quality: str = "default",
+        device: str = "auto",
+        threads: int | None = None,
+        region: bool | None = None,
     ) -> None:
-        """`device`: auto (a GPU when Cycles finds one), cpu or gpu; `threads`: CPU threads (None: all)."""
+        """`device`: auto (a GPU when Cycles finds one), cpu or gpu; `threads`: CPU threads (None: all);
+        `region`: trace only the pixels the objects may cover (covered_region), else the whole frame
+        (None: as region_render() says)."""
         quality_preset = preset(quality)
         self._bpy = import_bpy()
         self._bpy.ops.wm.read_factory_settings(use_empty=True)  # also resets the device preferences
@@ -53,6 +65,7 @@ class BlenderBackend:
         self.scene = BlenderScene(self._bpy, model, quality_preset, gpu, threads, self._workdir)
         self._hull = np.asarray(model.mesh.convex_hull.vertices, np.float64)
         self._model, self._rays = model, None
+        self.trace_region = region_render() if region is None else region
 
     @property
     def cycles_s(self) -> float:
@@ -62,6 +75,7 @@ class BlenderBackend:
     def render(self, spec: SceneSpec) -> Buffers:
         shown = replace(spec, camera=render_camera(spec.camera))
         self.scene.update(shown)
+        self.scene.set_region(self.region(shown))
         beauty = self.scene.render_beauty()
         if shown.camera == spec.camera:  # not `is`: render_camera's cache returns an equal camera of before
             instance, depth = instance_and_depth(beauty)
@@ -72,6 +86,17 @@ class BlenderBackend:
         image = composite(beauty, background_image(shown))
         buffers.rgb, buffers.camera = record_image(spec, image, buffers.instance)
         return buffers
+
+    def region(self, spec: SceneSpec) -> Region:
+        """The part of `spec`'s frame Cycles traces: around the target's hull and the props' meshes."""
+        cam = spec.camera
+        if not self.trace_region:
+            return full_frame(cam.width, cam.height)
+        target = self._hull @ spec.target.R_mat.T + spec.target.t_vec
+        objects = [target, *(np.asarray(prop_mesh(p).vertices) for p in spec.props)]
+        return covered_region(
+            cam.K_mat, cam.width, cam.height, objects, FILTER_WIDTH_PX / 2, DENOISE_MARGIN_PX
+        )
 
     def _ray_caster(self) -> MitsubaBackend:
         """The Mitsuba backend's exact geometric passes, made on first need (cameras with a lens)."""

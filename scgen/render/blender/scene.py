@@ -38,11 +38,13 @@ from scgen.render.blender.settings import (
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, render_seed
 from scgen.render.lighting import body_albedo_light, sun_render_irradiance
 from scgen.render.props import prop_mesh
+from scgen.render.region import Region, full_frame
 from scgen.scenes.finish import finished
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import CameraSpec, PropSpec, SceneSpec
 
 BEAUTY, PROBE, ALONE = "beauty", "probe", "alone"  # view layer names, prefixes of the EXR channels
+MISS_DEPTH = 1e10  # Cycles' Z pass where a pixel's centred ray meets nothing
 
 
 class BlenderScene:
@@ -108,6 +110,7 @@ class BlenderScene:
         self.alone.layer_collection.children[self.props_coll.name].exclude = True
         probe.material_override = self.alone.material_override = override
         self._camera_key: tuple | None = None
+        self.region = full_frame(1, 1)
         self.cycles_s = 0.0  # time inside bpy.ops.render.render, for benchmarks
 
     def update(self, spec: SceneSpec) -> None:
@@ -118,6 +121,18 @@ class BlenderScene:
         self._set_lights(spec)
         self._set_finish(spec.finish)
         self.beauty.cycles.seed = render_seed(spec)
+
+    def set_region(self, region: Region) -> None:
+        """Trace only `region` of the frame in both scenes (Cycles' border, cropped); the passes read back
+        are the full frame all the same, every pixel outside as a pixel that meets nothing renders."""
+        for scene in (self.beauty, self.aux):
+            r = scene.render
+            r.use_border = r.use_crop_to_border = not region.full
+            if not region.full:  # fractions of the frame, y from the bottom; Blender rounds them to pixels
+                W, H = region.width, region.height
+                r.border_min_x, r.border_max_x = region.x0 / W, region.x1 / W
+                r.border_min_y, r.border_max_y = (H - region.y1) / H, (H - region.y0) / H
+        self.region = region
 
     def render_beauty(self) -> dict[str, np.ndarray]:
         return self._render(self.beauty, self.beauty_exr)
@@ -134,7 +149,11 @@ class BlenderScene:
             self._bpy.ops.render.render(write_still=True, scene=scene.name)
         self.cycles_s += time.perf_counter() - t
         with OpenEXR.File(str(path), separate_channels=True) as f:
-            return {name: ch.pixels for part in f.parts for name, ch in part.channels.items()}
+            passes = {name: ch.pixels for part in f.parts for name, ch in part.channels.items()}
+        if self.region.full:
+            return passes
+        return {name: self.region.paste(px, MISS_DEPTH if name.endswith("Depth.Z") else 0.0)
+                for name, px in passes.items()}  # fmt: skip
 
     def _target_object(self, model: TargetModel) -> Any:
         """One mesh object for the whole target, one material slot per material class in use."""

@@ -37,6 +37,7 @@ PRESETS = {
     "default": QualityPreset(16, 0.02, 3, 1, 2, denoise_quality="FAST"),  # BlenderProc's BOP sample count
     "high": QualityPreset(64, 0.01, 4, 2, 2, denoise_quality="BALANCED"),
 }
+FILTER_WIDTH_PX = 1.5  # the beauty render's Blackman-Harris filter: samples land within 0.75 px of a centre
 SUN_ANGLE_RAD = 0.00925  # 0.53 degrees: the Sun's disc at 1 AU, so shadows stay hard
 
 
@@ -80,7 +81,7 @@ def configure_beauty(scene: Any, quality: QualityPreset, gpu: bool) -> None:
     c.diffuse_bounces = quality.diffuse_bounces
     c.glossy_bounces = quality.glossy_bounces
     c.pixel_filter_type = "BLACKMAN_HARRIS"
-    c.filter_width = 1.5
+    c.filter_width = FILTER_WIDTH_PX
     c.use_denoising = quality.denoise_quality is not None
     if quality.denoise_quality is not None:
         c.denoiser = "OPENIMAGEDENOISE"

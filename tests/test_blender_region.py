@@ -1,0 +1,151 @@
+"""Cycles traces only the region the objects cover, and gives the full frame's labels and image.
+
+Why a region render can equal a full-frame one: the film is transparent and the world black, so a pixel
+none of whose samples meets an object renders exactly zero in every pass; the sky and the camera stage
+(glare, blur, noise) act afterwards on the full-frame composite. Cycles seeds each pixel's samples from
+its full-frame coordinates and decides adaptive sampling per pixel, so without a denoiser every pixel of
+the region traces the same paths as in the full frame: the bound on the difference is zero, labels and
+image. The denoiser (OIDN) sees the region instead of the frame (another auto-exposure, its filters'
+windows cut at the region's edge), so its image differs; the bound there is the preset's own error: the
+crop may move the image over the objects by no more (RMS) than the full-frame render already lies from a
+many-sample reference, i.e. it keeps the quality the presets are chosen by (bench_blender.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from scgen.generator import Generator
+from scgen.io.buffers import Buffers
+from scgen.render.blender.backend import BlenderBackend
+from scgen.render.blender.settings import QualityPreset, configure_beauty
+from scgen.render.conventions import CLIP_START_M
+from scgen.render.region import covered_region, full_frame
+from scgen.scenes.spec import Pose, SunSpec
+
+SIZE = (160, 120)
+LABELS = ("depth", "instance", "target_depth", "normal", "sun_blocked")
+K = np.array([[100.0, 0.0, 80.0], [0.0, 100.0, 60.0], [0.0, 0.0, 1.0]])
+
+
+def test_region_is_the_projected_box_widened_by_the_filter_reach_and_the_margin():
+    points = np.array([[0.0, 0.0, 1.0], [0.1, 0.2, 1.0]])  # pixels (80, 60) and (90, 80)
+    r = covered_region(K, *SIZE, [points], reach_px=0.75, margin_px=0)
+    assert (r.x0, r.y0, r.x1, r.y1) == (80, 60, 91, 81)  # centres within 0.75 px: 80..90, 60..80
+    r = covered_region(K, *SIZE, [points], reach_px=0.75, margin_px=5)
+    assert (r.x0, r.y0, r.x1, r.y1) == (75, 55, 96, 86)
+    far = np.array([[10.0, 0.0, 1.0]])  # out of view to the right: nothing added
+    assert covered_region(K, *SIZE, [points, far], 0.75, 0).x1 == SIZE[0]
+    assert covered_region(K, *SIZE, [points, far], 0.75, 0).x0 == 80
+
+
+def test_region_is_the_whole_frame_when_an_object_reaches_the_near_plane_or_nothing_is_in_view():
+    near = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, CLIP_START_M / 2]])
+    assert covered_region(K, *SIZE, [near], 0.75, 0) == full_frame(*SIZE)
+    behind = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])  # wraps around the camera
+    assert covered_region(K, *SIZE, [behind], 0.75, 0) == full_frame(*SIZE)
+    outside = np.array([[-10.0, 0.0, 1.0], [-9.0, 1.0, 1.0]])
+    assert covered_region(K, *SIZE, [outside], 0.75, 0) == full_frame(*SIZE)
+
+
+@pytest.fixture(scope="module")
+def generator():
+    overrides = {"occluders": {"group_probs": {"none": 0.0, "slight": 0.0, "moderate": 1.0, "heavy": 0.0}}}
+    return Generator.load(seed=3, resolution=SIZE, overrides=overrides)
+
+
+@pytest.fixture(scope="module")
+def draft(generator):
+    backend = BlenderBackend(generator.model, quality="draft")
+    yield backend
+    backend.close()
+
+
+def both(backend: BlenderBackend, spec) -> tuple[Buffers, Buffers, object]:
+    """(full frame, region, the region) of one spec."""
+    backend.trace_region = False
+    full = backend.render(spec)
+    backend.trace_region = True
+    region = backend.render(spec)
+    return full, region, backend.scene.region
+
+
+def partly_out_of_view(spec):
+    """The target moved so that its centre projects onto the frame's left edge."""
+    t = spec.target.t_vec.copy()
+    K = spec.camera.K_mat
+    t[0] = -K[0, 2] * t[2] / K[0, 0]
+    return replace(spec, target=Pose(spec.target.R, tuple(t)))
+
+
+def occluder_across_the_frame(spec):
+    """The first prop made a truss along the image's rows, so near the camera that it spans the frame's
+    width (a band: not the whole frame)."""
+    K, width = spec.camera.K_mat, spec.camera.width
+    length = 0.2
+    z = 0.75 * length * K[0, 0] / width  # its length projects onto 4/3 of the width
+    identity = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    pose = Pose(identity, (0.0, 0.0, z))
+    truss = replace(spec.props[0], shape="truss", size=(length, 0.03, 0.03), pose=pose)
+    return replace(spec, props=(truss, *spec.props[1:]))
+
+
+def sun_in_view(spec):
+    """The sun just off the optical axis: its disc, ghosts and veiling glare over the whole image."""
+    s = np.array([0.05, -0.03, 1.0])
+    return replace(spec, sun=SunSpec(tuple(s / np.linalg.norm(s)), "normal", 1361.0))
+
+
+CASES = {
+    "default": lambda spec: spec,
+    "partly out of view": partly_out_of_view,
+    "occluder across the frame": occluder_across_the_frame,
+    "sun glare": sun_in_view,
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_without_a_denoiser_the_region_render_is_the_full_frame_byte_for_byte(generator, draft, case):
+    spec = CASES[case](generator.scene(0))
+    full, region, traced = both(draft, spec)
+    assert not traced.full
+    for name in LABELS:
+        assert np.array_equal(getattr(full, name), getattr(region, name)), name
+    assert np.array_equal(full.rgb, region.rgb)
+    assert full.camera == region.camera
+    hit = np.nonzero(full.instance)
+    assert hit[0].size and traced.window[0].start <= hit[0].min() and hit[0].max() < traced.window[0].stop
+    assert traced.window[1].start <= hit[1].min() and hit[1].max() < traced.window[1].stop
+    if case == "partly out of view":
+        assert traced.x0 == 0 and (full.instance[:, 0] == 1).any()
+    if case == "occluder across the frame":
+        assert (traced.x0, traced.x1) == (0, SIZE[0]) and not traced.full
+        assert (full.instance[:, 0] == 2).any() and (full.instance[:, -1] == 2).any()
+    if case == "sun glare":
+        assert full.camera.flare
+
+
+def rms_over_objects(a: np.ndarray, b: np.ndarray, instance: np.ndarray) -> float:
+    on = instance > 0
+    return float(np.sqrt(np.mean((a.astype(np.float64) - b.astype(np.float64))[on] ** 2)))
+
+
+def test_denoised_region_render_keeps_the_labels_and_the_presets_quality(generator):
+    spec = partly_out_of_view(generator.scene(1))
+    backend = BlenderBackend(generator.model, quality="default")
+    try:
+        full, region, traced = both(backend, spec)
+        backend.trace_region = False
+        configure_beauty(backend.scene.beauty, QualityPreset(256, 0.001, 8, 4, 4, None), gpu=False)
+        reference = backend.render(spec)
+    finally:
+        backend.close()
+    assert not traced.full
+    for name in LABELS:
+        assert np.array_equal(getattr(full, name), getattr(region, name)), name
+    moved = rms_over_objects(region.rgb, full.rgb, full.instance)
+    error = rms_over_objects(full.rgb, reference.rgb, full.instance)
+    assert 0 < moved <= error, (moved, error)
