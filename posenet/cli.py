@@ -17,7 +17,7 @@ from posenet.checkpoint import load_checkpoint, load_model
 from posenet.config import AMP_MODES, config_from_dict, load_config
 from posenet.data.boxes import boxes_from_gt
 from posenet.data.layout import scan_split
-from posenet.detection.detect import detect_split, detection_entries
+from posenet.detection.detect import MIN_SCORE, detect_split, detection_entries
 from posenet.detection.detector import load_detector_config
 from posenet.detection.train import BEST, train_detector
 from posenet.doctor import check_config_packages
@@ -478,6 +478,13 @@ def viz(
     help="The pose network's ONNX graph (posenet export) run in onnxruntime instead of torch; a .onnx "
     "--detector runs there too.",
 )
+@click.option(
+    "--min-score",
+    type=click.FloatRange(0, 1),
+    default=MIN_SCORE,
+    show_default=True,
+    help="The detector's score floor: a best box scoring less is no detection (flag no_detection).",
+)
 @click.option("--overwrite", is_flag=True, help="Write into an existing, non-empty --out.")
 def predict(
     source: str | None,
@@ -493,6 +500,7 @@ def predict(
     no_vis: bool,
     device: str,
     onnx_path: Path | None,
+    min_score: float,
     overwrite: bool,
 ) -> None:
     """Poses from images a user brings: SOURCE is an image, a folder, a glob or a video (or --data DIR
@@ -501,23 +509,21 @@ def predict(
     ground-truth boxes, as posenet eval), cropped, and its pose decoded in the user's camera."""
     check_output(out, folder=True, overwrite=overwrite)
     inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
-                            preset_intrinsics, onnx_path)  # fmt: skip
+                            preset_intrinsics, onnx_path, min_score)  # fmt: skip
     make_output_folder(out)
     with tqdm(total=inputs.total, desc="predict", unit="img", dynamic_ncols=True) as bar:
         run = run_predict(inputs.predictor, inputs.frames, inputs.total, out, inputs.camera, inputs.box_for,
                           vis=not no_vis, formats=formats, video_fps=inputs.video_fps, progress=bar.update,
                           warn=tqdm.write)  # fmt: skip
     posed = sum(r.get("R") is not None for r in run.records)
-    click.echo(f"{len(run.records)} inputs, {posed} poses, {run.failed} unreadable, "
+    click.echo(f"{len(run.records)} inputs, {posed} poses, {run.failed} failed, "
                f"{len(run.records) / max(run.seconds, 1e-9):.1f} images/s")  # fmt: skip
     stages = inputs.predictor.timings.mean_ms()
     click.echo("latency per image (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
     for path in run.files:
         click.echo(f"wrote {path}")
     if run.failed:
-        raise PosenetError(
-            f"{run.failed} of {len(run.records)} inputs could not be read (see {run.files[0]})"
-        )
+        raise PosenetError(f"{run.failed} of {len(run.records)} inputs failed (see {run.files[0]})")
 
 
 if __name__ == "__main__":  # `python -m posenet.cli`, e.g. under `torchrun -m`

@@ -20,11 +20,14 @@ from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.checkpoint import load_checkpoint, save_checkpoint
 from posenet.cli import main
-from posenet.data.camera import map_box, read_camera_file, to_training_camera
+from posenet.data.camera import CameraMismatch, map_box, read_camera_file, resized, to_training_camera
+from posenet.errors import PosenetError
 from posenet.evaluation.evaluate import evaluate
 from posenet.predict import Predictor, make_camera
 from scgen.generator import Generator
 from scgen.io import bop
+from scgen.run.runner import RenderJob, run_render
+from scgen.scenes.config.camera import camera_preset
 from scgen.scenes.spec import CameraSpec
 
 # a detector as a user could train it, shrunk to a step from random init: the test is of the path, not of
@@ -168,7 +171,7 @@ def test_a_bad_image_is_recorded_and_the_batch_goes_on(user_folder: Path, pose_c
         (["--camera", "1,2,3"], "--camera '1,2,3' needs 4 numbers"),
         (["--camera", "nosuchpreset"], "unknown camera preset 'nosuchpreset'"),
         (["--box", "1,2,3"], "--box must be x,y,w,h"),
-        (["--source", "nothing/here*.png"], "no file matches"),
+        (["--source", "nothing/here*.png"], "no image matches nothing/here*.png"),
     ],
 )
 def test_bad_inputs_are_one_line_and_write_nothing(
@@ -280,6 +283,7 @@ def test_onnx_gives_torch_poses(user_folder: Path, pose_ckpt: Path, detector_ckp
     _invoke("export", "--ckpt", pose_ckpt, "--onnx", pose_onnx, "--detector", detector_ckpt,
             "--detector-onnx", det_onnx)  # fmt: skip
     common = [user_folder, "--ckpt", pose_ckpt, "--camera", user_folder / "camera.json", "--no-vis"]
+    common += ["--min-score", 0]  # every box: the 1-step detector's scores are not the point here
     _invoke("predict", *common, "--detector", detector_ckpt, "--out", tmp_path / "torch")
     _invoke("predict", *common, "--detector", det_onnx, "--onnx", pose_onnx, "--out", tmp_path / "onnx")
     torch_lines, onnx_lines = (_lines(tmp_path / d / "predictions.jsonl") for d in ("torch", "onnx"))
@@ -290,3 +294,156 @@ def test_onnx_gives_torch_poses(user_folder: Path, pose_ckpt: Path, detector_ckp
             np.testing.assert_allclose(b["box"], a["box"], atol=0.02)
             np.testing.assert_allclose(b["R"], a["R"], atol=1e-3)
             np.testing.assert_allclose(b["t"], a["t"], atol=1e-3)
+
+
+def _write_video(path: Path, images: list[Path]) -> None:
+    first = cv2.imread(str(images[0]))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, first.shape[1::-1])
+    for image in images:
+        writer.write(cv2.imread(str(image)))
+    writer.release()
+
+
+def test_a_glob_follows_a_folders_rules(user_folder: Path, pose_ckpt: Path, tmp_path: Path):
+    """A quoted glob over a folder that also holds a video and notes skips them, as the folder does."""
+    folder = tmp_path / "in"
+    shutil.copytree(user_folder, folder)
+    _write_video(folder / "clip.mp4", sorted(folder.glob("frame*")))
+    (folder / "notes.txt").write_text("not an image\n")
+    box = "100,60,120,120"
+    by_folder = _predict_to(tmp_path / "dir", folder, pose_ckpt, folder / "camera.json", box)
+    by_glob = _predict_to(tmp_path / "glob", f"{folder}/*", pose_ckpt, folder / "camera.json", box)
+    records = [_lines(out / "predictions.jsonl") for out in (by_folder, by_glob)]
+    assert [{**r, "time_ms": None} for r in records[0]] == [{**r, "time_ms": None} for r in records[1]]
+    assert [Path(r["source"]).name for r in records[1]] == [p.name for p in sorted(folder.glob("frame*"))]
+
+
+def test_an_image_its_camera_cannot_take_is_one_record_and_the_batch_goes_on(
+    user_folder: Path, pose_ckpt: Path, tmp_path: Path
+):
+    """Another aspect ratio, a larger image, and an inline camera's principal point far from an image's
+    centre are each an error record and a warning naming the file; an image scaled down from the camera's
+    size goes through the camera scaled with it."""
+    folder = tmp_path / "in"
+    shutil.copytree(user_folder, folder)
+    image = cv2.imread(str(sorted(folder.glob("frame*"))[0]))
+    cv2.imwrite(str(folder / "half.png"), cv2.resize(image, (160, 120), interpolation=cv2.INTER_AREA))
+    cv2.imwrite(str(folder / "square.png"), cv2.resize(image, (240, 240)))
+    cv2.imwrite(str(folder / "large.png"), cv2.resize(image, (640, 480)))
+    camera = read_camera_file(folder / "camera.json")
+    inline = ",".join(f"{v:g}" for v in (camera.K[0, 0], camera.K[1, 1], camera.K[0, 2], camera.K[1, 2]))
+    refused = {
+        "file": {"square.png": "(another aspect ratio)", "large.png": "(larger than the camera's images)"},
+        "inline": {"half.png": "principal point", "large.png": "principal point"},
+    }
+    for name, cam in (("file", folder / "camera.json"), ("inline", inline)):
+        out = tmp_path / name
+        args = ["predict", folder, "--ckpt", pose_ckpt, "--camera", cam, "--box", "30,20,60,60", "--out", out]
+        res = CliRunner().invoke(main, [str(a) for a in args])
+        last = res.output.strip().splitlines()[-1]
+        assert res.exit_code == 1 and last.startswith(f"Error: {len(refused[name])} of"), res.output
+        records = {Path(r["source"]).name: r for r in _lines(out / "predictions.jsonl")}
+        assert len(records) == len(list(folder.glob("*.png")))  # the batch went on past each
+        for file, r in records.items():
+            if file in refused[name]:
+                assert refused[name][file] in r["error"] and f"{file}: the image is" in res.output, file
+            else:
+                assert "error" not in r and r["R"] is not None, (name, file)
+    # the scaled camera is the resized image's, exactly: pixel centres at integers, the lens unchanged
+    half = camera.for_image((160, 120))
+    np.testing.assert_array_equal(half.K, resized(camera, (160, 120)).K)
+    np.testing.assert_array_equal(half.K[:2, :2], camera.K[:2, :2] / 2)  # halving is exact in binary
+    assert half.K[0, 2] == (camera.K[0, 2] + 0.5) / 2 - 0.5 and np.array_equal(half.dist, camera.dist)
+    with pytest.raises(CameraMismatch, match="another aspect ratio"):
+        Predictor.load(pose_ckpt)(cv2.imread(str(folder / "square.png")), camera, (30, 20, 60, 60))
+
+
+@pytest.fixture(scope="module")
+def lens_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """2 training samples through SPEED+'s lens (its distortion, as scgen renders it), at 480x300."""
+    out = tmp_path_factory.mktemp("lens") / "ds"
+    job = RenderJob(out=out, n=2, seed=3, backend="mitsuba", quality="draft", resolution=(480, 300),
+                    camera="speedplus", ratios=(1.0, 0.0, 0.0))  # fmt: skip
+    run_render(job, progress=False)
+    return out
+
+
+def test_a_lens_dataset_carries_its_lens_and_predict_takes_it(
+    lens_dataset: Path, pose_ckpt: Path, tmp_path: Path
+):
+    """camera.json holds the lens as every image's scene_camera entry does, and --data predicts its images
+    through it: the same poses as each image with --camera camera.json (the same warp)."""
+    camera = read_camera_file(lens_dataset / bop.CAMERA_FILE)
+    np.testing.assert_array_equal(camera.dist, camera_preset("speedplus")["dist"])
+    assert camera.size == (480, 300)
+    by_data = tmp_path / "data"
+    _invoke("predict", "--data", lens_dataset, "--split", "train", "--ckpt", pose_ckpt, "--out", by_data,
+            "--no-vis")  # fmt: skip
+    records = _lines(by_data / "predictions.jsonl")
+    assert len(records) == 2 and all(r["R"] is not None for r in records)
+    for r in records:
+        one = tmp_path / f"one{r['im_id']}"
+        _invoke("predict", r["source"], "--ckpt", pose_ckpt, "--camera", lens_dataset / bop.CAMERA_FILE,
+                "--box", ",".join(map(repr, r["box"])), "--out", one, "--no-vis")  # fmt: skip
+        alone = _lines(one / "predictions.jsonl")[0]
+        # the same warp and network; the box went through JSON at 0.01 px (Pose.to_json rounds it)
+        np.testing.assert_allclose(alone["R"], r["R"], atol=1e-3)
+        np.testing.assert_allclose(alone["t"], r["t"], atol=1e-3)
+
+
+def test_the_python_api_takes_what_the_cli_takes(user_folder: Path, pose_ckpt: Path, tmp_path: Path):
+    """Grey, BGRA, 16-bit, 12-bit-in-16 and float [0, 1] versions of one image give its uint8 pose exactly
+    (each converts back to the same bytes: 257 x, 4095 / 255 x and x / 255 round back to x); other kinds
+    are one PosenetError. The CLI reads a 12-bit PNG alike, with one warning."""
+    predictor = Predictor.load(pose_ckpt)
+    camera = read_camera_file(user_folder / "camera.json")
+    bgr = cv2.imread(str(sorted(user_folder.glob("frame*"))[0]))
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+    box = (100.0, 60.0, 120.0, 120.0)
+    uint8 = predictor(bgr, camera, box)
+    for name, image, same_as in [
+        ("bgra", np.dstack([bgr, np.full(bgr.shape[:2], 7, np.uint8)]), bgr),
+        ("uint16", bgr.astype(np.uint16) * 257, bgr),
+        ("float", bgr.astype(np.float32) / 255, bgr),
+        ("grey", grey, np.dstack([grey] * 3)),
+        ("grey1", grey[..., None], np.dstack([grey] * 3)),
+    ]:
+        np.testing.assert_array_equal(
+            predictor(image, camera, box).R, predictor(same_as, camera, box).R, name
+        )
+    twelve = np.round(bgr.astype(np.float64) * 4095 / 255).astype(np.uint16)
+    with pytest.warns(UserWarning, match="read as 12-bit data"):
+        np.testing.assert_array_equal(predictor(twelve, camera, box).R, uint8.R)
+    for bad, message in [
+        (bgr.astype(np.int32), "uint8, uint16 or float"),
+        (bgr.astype(np.float32), r"must lie in \[0, 1\]"),
+        (bgr[..., :2], "H x W x 1, 3 or 4"),
+    ]:
+        with pytest.raises(PosenetError, match=message):
+            predictor(bad, camera, box)
+    folder = tmp_path / "deep"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "a12.png"), twelve)
+    cv2.imwrite(str(folder / "b12.png"), twelve)
+    out = tmp_path / "out"
+    output = _invoke("predict", folder, "--ckpt", pose_ckpt, "--camera", user_folder / "camera.json", "--box",
+                     ",".join(map(str, box)), "--out", out, "--no-vis")  # fmt: skip
+    assert output.count("read as 12-bit data") == 1 and "a12.png" in output
+    assert all(r["R"] == uint8.R.ravel().tolist() for r in _lines(out / "predictions.jsonl"))
+
+
+def test_a_detection_under_the_score_floor_is_none(
+    user_folder: Path, pose_ckpt: Path, detector_ckpt: Path, tmp_path: Path
+):
+    """--min-score: a best box scoring under it is no_detection, its score kept; 0 takes every box."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "black.png"), np.zeros((240, 320, 3), np.uint8))
+    shutil.copy(sorted(user_folder.glob("frame*"))[0], folder / "frame.png")
+    common = [folder, "--ckpt", pose_ckpt, "--detector", detector_ckpt, "--camera", "training", "--no-vis"]
+    _invoke("predict", *common, "--min-score", 0, "--out", tmp_path / "all")
+    _invoke("predict", *common, "--min-score", 1, "--out", tmp_path / "none")
+    found, floored = (_lines(tmp_path / d / "predictions.jsonl") for d in ("all", "none"))
+    assert all(r["R"] is not None and r["flags"] != ["no_detection"] for r in found)
+    for a, b in zip(found, floored, strict=True):  # a score is a probability: under 1
+        assert b["flags"] == ["no_detection"] and b["R"] is None and b["score"] == a["score"] < 1

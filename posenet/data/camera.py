@@ -25,6 +25,15 @@ import numpy as np
 from posenet.errors import PosenetError
 
 DIST_COEFFS = 5  # OpenCV's k1, k2, p1, p2, k3
+# a camera without a size (inline numbers, a bare K) fits an image whose centre its principal point lies
+# within this share of the image's width and height of: calibrated cameras sit within a few per cent,
+# while a camera meant for an image 1.7x larger or smaller than the one given misses by more
+CENTRE_SPAN = 0.2
+
+
+class CameraMismatch(PosenetError):
+    """An image that cannot go through the given camera: one input's error (predict records it and goes
+    on), not the run's."""
 
 
 @dataclass(frozen=True)
@@ -40,13 +49,31 @@ class Camera:
     def distorted(self) -> bool:
         return bool(np.any(self.dist != 0))
 
-    def with_size(self, size: tuple[int, int]) -> Camera:
-        """This camera at an image's size: an explicit size must match it."""
-        if self.size is not None and tuple(self.size) != tuple(size):
-            raise PosenetError(
-                f"image is {size[0]}x{size[1]} but the camera is for {self.size[0]}x{self.size[1]}"
-            )
-        return Camera(self.K, self.dist, (int(size[0]), int(size[1])))
+    def for_image(self, size: tuple[int, int]) -> Camera:
+        """This camera for an image of `size` (width, height). A camera with a size takes its own size, or
+        a smaller one of its aspect ratio: the image was scaled down, so K scales with it (resized; the
+        lens' coefficients act on normalised coordinates and stay). A larger image or another aspect
+        ratio is another camera's (or a crop's). A camera without a size takes an image whose centre
+        lies near its principal point (CENTRE_SPAN). Refused: CameraMismatch."""
+        w, h = int(size[0]), int(size[1])
+        if self.size is None:
+            off = max(abs(self.K[0, 2] - (w - 1) / 2) / w, abs(self.K[1, 2] - (h - 1) / 2) / h)
+            if off > CENTRE_SPAN:
+                raise CameraMismatch(
+                    f"the image is {w}x{h} but the camera's principal point ({self.K[0, 2]:g}, "
+                    f"{self.K[1, 2]:g}) lies {off:.0%} of it from its centre (at most {CENTRE_SPAN:.0%}): "
+                    f"a camera for about {2 * self.K[0, 2] + 1:.0f}x{2 * self.K[1, 2] + 1:.0f} images"
+                )
+            return Camera(self.K, self.dist, (w, h))
+        W, H = self.size
+        if (w, h) == (W, H):
+            return self
+        # scaled down by some s with round(W s) = w and round(H s) = h: the two intervals of s overlap
+        same_aspect = max((w - 0.5) / W, (h - 0.5) / H) <= min((w + 0.5) / W, (h + 0.5) / H)
+        if w <= W and h <= H and same_aspect:
+            return resized(self, (w, h))
+        why = "larger than the camera's images" if same_aspect else "another aspect ratio"
+        raise CameraMismatch(f"the image is {w}x{h} but the camera is for {W}x{H} ({why})")
 
     def same_as(self, other: Camera) -> bool:
         """Whether the two take the same picture (the warp between them is the identity)."""
@@ -168,7 +195,7 @@ def _cached_warp_maps(user: Camera, train: Camera) -> tuple[np.ndarray, np.ndarr
 def to_training_camera(image: np.ndarray, user: Camera, train: Camera) -> np.ndarray:
     """`image` (taken by `user`, at its size) as the training camera would have recorded it from the same
     place; the image itself when the two cameras are the same."""
-    user = user.with_size((image.shape[1], image.shape[0]))
+    user = user.for_image((image.shape[1], image.shape[0]))
     if user.same_as(train):
         return image
     s = shrink_factor(user, train)

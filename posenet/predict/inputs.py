@@ -68,6 +68,7 @@ def predict_inputs(
     device: torch.device,
     presets: PresetLookup,
     onnx: Path | None = None,
+    min_score: float | None = None,
 ) -> PredictInputs:
     """The checked inputs of one predict run (nothing is written here)."""
     if (source is None) == (data is None):
@@ -78,7 +79,7 @@ def predict_inputs(
         raise PosenetError("--camera is required with SOURCE: fx,fy,cx,cy[,dist], a camera.json, a scgen "
                            "preset name, or 'training' (the checkpoint's own camera)")  # fmt: skip
     fixed_box = parse_box(box) if box is not None else None
-    predictor = Predictor.load(ckpt, detector, device, data, onnx)
+    predictor = Predictor.load(ckpt, detector, device, data, onnx, min_score)
     obj_id = predictor.obj.obj_id
     if data is not None:
         if camera is not None:

@@ -10,9 +10,10 @@ posenet.geometry.decode_pose, so predict and eval cannot disagree on a conventio
 from __future__ import annotations
 
 import time
+import warnings
 from collections import defaultdict
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,7 @@ from posenet.data.layout import image_size, scan_split
 from posenet.data.object_model import ObjectModel, load_object_model, object_from_record
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose, mask_probability
+from posenet.predict.pixels import to_bgr8
 from posenet.predict.ransac import MIN_POINTS, correspondences
 
 Box = tuple[float, float, float, float]  # [x, y, w, h]: pixels x .. x + w - 1 (posenet.data.crop)
@@ -47,7 +49,8 @@ STAGES = ("decode", "detector", "crop", "pose_network", "solve", "drawing")  # t
 @dataclass(frozen=True)
 class Pose:
     """One image's answer. R, t: model to camera (X_cam = R X + t, metres) in the user's camera, None
-    without a detection; box [x, y, w, h] in the user's image; score: the detector's (1 for a given box);
+    without a detection; box [x, y, w, h] in the user's image; score: the detector's (1 for a given box; with
+    no_detection, its best under the score floor, 0 for none);
     confidence: the share of the predicted visible pixels whose predicted model point the pose projects
     back within one output cell (0 to 1); flags: those of FLAGS that hold."""
 
@@ -122,9 +125,11 @@ class Predictor:
         camera: Camera,
         detector: Detector | None = None,
         device: torch.device | None = None,
+        min_score: float = 0.0,
     ) -> None:
         cfg = config_from_dict(state["config"])
         self.network, self.obj, self.camera, self.detector = network, obj, camera, detector
+        self.min_score = min_score  # a detection scoring less is none (no_detection)
         self.device = device or torch.device("cpu")
         self.pad_scale, self.mask_type = cfg.data.pad_scale, cfg.loss.mask_type
         model_cfg = state["model_config"]
@@ -140,12 +145,16 @@ class Predictor:
         device: str | torch.device = "cpu",
         data: Path | None = None,
         onnx: Path | None = None,
+        min_score: float | None = None,
     ) -> Predictor:
         """The pose checkpoint `ckpt` and a detector (its checkpoint, or its ONNX graph from `posenet
         export`: a `.onnx` file runs in onnxruntime) on `device`; `onnx`, the pose network's exported
         graph, runs in onnxruntime instead of torch (the checkpoint still gives the object and camera). A
         checkpoint written before predict existed has no object or camera: `data`, the dataset it was
-        trained on, supplies them."""
+        trained on, supplies them. A detection scoring under `min_score` (None: the detector's floor,
+        posenet.detection.detect.MIN_SCORE) is no detection."""
+        from posenet.detection.detect import MIN_SCORE  # torchvision's FCOS: only when asked for
+
         dev = torch.device(device)
         state = load_checkpoint(ckpt, kind="pose")
         obj, camera = _object_and_camera(state, ckpt, data)
@@ -153,7 +162,8 @@ class Predictor:
             network = onnx_network(onnx, state["model_config"]["input_res"])
         else:
             network = model_from_state(state, ckpt, dev)  # the checkpoint is read once
-        return cls(network, state, obj, camera, load_box_detector(detector, camera, dev), dev)
+        floor = MIN_SCORE if min_score is None else min_score
+        return cls(network, state, obj, camera, load_box_detector(detector, camera, dev), dev, floor)
 
     def detect(self, image: np.ndarray) -> tuple[Box, float] | None:
         """The detector's best box [x, y, w, h] and score in an image of the training camera, or None."""
@@ -167,20 +177,23 @@ class Predictor:
         return (float(x0) + 0.5, float(y0) + 0.5, float(x1 - x0), float(y1 - y0)), score
 
     def __call__(self, image: np.ndarray, camera: Camera | np.ndarray, box: Box | None = None) -> Pose:
-        """The pose in `image` (H x W x 3 uint8, BGR as OpenCV reads it; grey is taken too) seen by
-        `camera` (a Camera, or a 3x3 K for a pinhole camera), at `box` ([x, y, w, h] in the image) or
-        at the detector's box."""
-        if image.ndim == 2:
-            image = np.repeat(image[..., None], 3, axis=2)
+        """The pose in `image` seen by `camera` (a Camera, or a 3x3 K for a pinhole camera), at `box`
+        ([x, y, w, h] in the image) or at the detector's box. `image` is what the CLI reads too
+        (posenet.predict.pixels.to_bgr8): grey, BGR or BGRA in OpenCV's order, uint8, uint16 (12-bit data
+        in it is found and warned of) or float in [0, 1]; another kind is one PosenetError, and an image
+        the camera cannot take (posenet.data.camera.Camera.for_image) one CameraMismatch."""
+        image, note = to_bgr8(image)
+        if note is not None:
+            warnings.warn(note, stacklevel=2)
         user = camera if isinstance(camera, Camera) else make_camera(camera)
-        user = user.with_size((image.shape[1], image.shape[0]))
+        user = user.for_image((image.shape[1], image.shape[0]))
         with _Clock(self.timings, "crop"):
             seen = to_training_camera(image, user, self.camera)
         if box is None:
             with _Clock(self.timings, "detector"):
                 found = self.detect(seen)
-            if found is None:
-                return NO_DETECTION
+            if found is None or found[1] < self.min_score:
+                return replace(NO_DETECTION, score=found[1] if found else 0.0)
             train_box, score = found
             box = map_box(train_box, self.camera, user)
         else:

@@ -1,5 +1,6 @@
 """`posenet predict`'s batch: every input through the Predictor, one JSON line each, overlays, and the
-optional BOP19 results and SPEED+ submission files; an unreadable input is recorded and the batch goes on.
+optional BOP19 results and SPEED+ submission files; an input that cannot be read, or cannot go through
+its camera, is recorded and the batch goes on.
 
 OUT/predictions.jsonl   one line per input: source, (scene_id, im_id), Pose.to_json(), time_ms; or error
 OUT/results.csv         --format bop: BOP19 results (scene_id,im_id,obj_id,score,R,t,time; t in mm)
@@ -22,7 +23,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from posenet.data.camera import Camera
+from posenet.data.camera import Camera, CameraMismatch
 from posenet.predict.overlay import contact_sheet, draw_pose
 from posenet.predict.predictor import NO_DETECTION, Box, Predictor
 from posenet.predict.sources import Frame, load_frame
@@ -72,7 +73,7 @@ def run_predict(
     writer: cv2.VideoWriter | None = None
     if vis and not video_fps:
         (out / "overlays").mkdir(exist_ok=True)
-    stream = iter(frames)
+    stream, noted = iter(frames), set()
     for index in itertools.count():
         before = {s: len(v) for s, v in predictor.timings.ms.items()}
         t0 = time.perf_counter()  # a file or video frame is decoded by the stream, a dataset's by load_frame
@@ -84,18 +85,21 @@ def run_predict(
         base: dict[str, Any] = {"source": frame.name, "index": index}
         if frame.key is not None:
             base |= {"scene_id": frame.key[0], "im_id": frame.key[1]}
-        if frame.image is None:
+        cam, error = _camera_for(frame, camera)
+        if error is not None:
             run.failed += 1
-            run.records.append({**base, "error": frame.error})
-            warn(f"Warning: {frame.name}: {frame.error}")
+            run.records.append({**base, "error": error})
+            warn(f"Warning: {frame.name}: {error}")
         else:
-            cam = frame.camera or camera
-            assert cam is not None
+            assert frame.image is not None and cam is not None
+            if frame.note is not None and frame.note not in noted:
+                noted.add(frame.note)
+                warn(f"Warning: {frame.name}: {frame.note} (so is every such input after it, unmentioned)")
             box = box_for(frame, index)
             pose = NO_DETECTION if box == MISS else predictor(frame.image, cam, box)  # type: ignore[arg-type]
             if vis:
                 t1 = time.perf_counter()
-                drawn = draw_pose(frame.image, pose, predictor.obj, cam.with_size(frame.image.shape[1::-1]))
+                drawn = draw_pose(frame.image, pose, predictor.obj, cam)
                 if video_fps:
                     if writer is None:
                         writer = _video_writer(out / "overlay.mp4", video_fps, drawn.shape[1::-1])
@@ -117,6 +121,19 @@ def run_predict(
     run.seconds = time.perf_counter() - tic
     _write_outputs(run, out, formats, sheet)
     return run
+
+
+def _camera_for(frame: Frame, camera: Camera | None) -> tuple[Camera | None, str | None]:
+    """The frame's camera (a dataset's own, else the run's) fitted to its image, or why there is none:
+    the image could not be read, or cannot go through that camera (CameraMismatch)."""
+    if frame.image is None:
+        return None, frame.error
+    cam = frame.camera or camera
+    assert cam is not None
+    try:
+        return cam.for_image(frame.image.shape[1::-1]), None
+    except CameraMismatch as exc:
+        return None, str(exc)
 
 
 def _video_writer(path: Path, fps: float, size: tuple[int, int]) -> cv2.VideoWriter:

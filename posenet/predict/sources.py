@@ -1,15 +1,16 @@
 """What `posenet predict` reads: an image, a folder, a glob or a video, or a split of a labelled dataset.
 
-Each input is a `Frame`: its name (the file, `video.mp4#000012` for a frame), the image or the reason it
-could not be read (a bad input is recorded, and the batch goes on), and, from a dataset, its camera, its
+Each input is a `Frame`: its name (the file, `video.mp4#000012` for a frame), the image (posenet.predict.
+pixels.to_bgr8's) or the reason it could not be read (a bad input is recorded, and the batch goes on), a
+note on how it was read where that was a guess, and, from a dataset, its camera (lens included), its
 (scene_id, im_id) and ground-truth box.
 """
 
 from __future__ import annotations
 
 import glob
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -18,10 +19,14 @@ import numpy as np
 from posenet.data.camera import Camera, make_camera
 from posenet.data.layout import scan_split
 from posenet.errors import PosenetError
+from posenet.predict.pixels import to_bgr8
 from scgen.io import read_image, why_unreadable
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v")
+# what OpenCV decodes of an image file: any depth (16-bit kept for to_bgr8), grey or colour (alpha dropped),
+# turned as its EXIF orientation says
+READ_FLAGS = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR
 
 
 @dataclass(frozen=True)
@@ -32,6 +37,7 @@ class Frame:
     camera: Camera | None = None  # a dataset's per-image camera
     key: tuple[int, int] | None = None  # a dataset's (scene_id, im_id)
     box: tuple[float, float, float, float] | None = None  # a dataset's ground-truth box (bbox_obj)
+    note: str | None = None  # how the image was read, where that was a guess (to_bgr8)
 
 
 @dataclass(frozen=True)
@@ -64,7 +70,8 @@ class Source:
 
 def resolve_source(text: str) -> Source:
     """The inputs SOURCE names: a video file, an image file, a folder's images (sorted, not recursive)
-    or a glob's images; nothing to read is a one-line error."""
+    or a glob's images (a glob follows a folder's rules: images only); nothing to read is a one-line
+    error."""
     path = Path(text)
     if path.is_file():
         if path.suffix.lower() in VIDEO_SUFFIXES:
@@ -76,16 +83,18 @@ def resolve_source(text: str) -> Source:
             return Source(video=path)
         return Source(images=(path,))
     if path.is_dir():
-        images = tuple(sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES))
-        if not images:
-            raise PosenetError(f"{path} holds no images ({', '.join(IMAGE_SUFFIXES)})")
-        return Source(images=images)
+        return Source(images=_images(path.iterdir(), f"{path} holds no images"))
     if glob.has_magic(text):
-        images = tuple(sorted(Path(p) for p in glob.glob(text) if Path(p).is_file()))
-        if not images:
-            raise PosenetError(f"no file matches {text}")
-        return Source(images=images)
+        return Source(images=_images(map(Path, glob.glob(text)), f"no image matches {text}"))
     raise PosenetError(f"no such image, folder, glob or video: {text}")
+
+
+def _images(paths: Iterable[Path], none: str) -> tuple[Path, ...]:
+    """The image files (IMAGE_SUFFIXES) among `paths`, sorted; none is the one-line error `none`."""
+    images = tuple(sorted(p for p in paths if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()))
+    if not images:
+        raise PosenetError(f"{none} ({', '.join(IMAGE_SUFFIXES)})")
+    return images
 
 
 def read_frames(source: Source) -> Iterator[Frame]:
@@ -104,22 +113,34 @@ def read_frames(source: Source) -> Iterator[Frame]:
             cap.release()
         return
     for path in source.images:
-        image = read_image(path, cv2.IMREAD_COLOR)
-        yield Frame(
-            str(path), image, None if image is not None else f"cannot read image: {why_unreadable(path)}"
-        )
+        yield _read(Frame(str(path), None))
+
+
+def _read(frame: Frame) -> Frame:
+    """The frame with its file read and converted, or the reason it could not be."""
+    path = Path(frame.name)
+    image, note, error = read_image(path, READ_FLAGS), None, None
+    if image is None:
+        error = f"cannot read image: {why_unreadable(path)}"
+    else:
+        try:
+            image, note = to_bgr8(image)
+        except PosenetError as exc:
+            image, error = None, str(exc)
+    return replace(frame, image=image, error=error, note=note)
 
 
 def dataset_frames(data: Path, split: str, obj_id: int) -> list[Frame]:
     """One Frame per image of the split showing `obj_id` (read lazily: image None until `load_frame`),
-    with the image's camera (cam_K, cam_dist) and the instance's full-object box, as `posenet eval`
-    crops it."""
+    with the image's camera (cam_K and a lens' cam_dist: the image is warped into the training camera as
+    any other) and the instance's full-object box, as `posenet eval` crops it. An unreadable image is
+    that frame's error, not the split's."""
     frames, seen = [], set()
-    for inst in scan_split(data, split, obj_id):
+    for inst in scan_split(data, split, obj_id, lens=True, check_images=False):
         if inst.px_count_visib <= 0 or inst.key in seen:
             continue
         seen.add(inst.key)
-        camera = make_camera(inst.K, None, inst.image_size)
+        camera = make_camera(inst.K, inst.dist, inst.image_size)
         frames.append(
             Frame(str(inst.rgb), None, None, camera, inst.key, tuple(float(v) for v in inst.bbox_obj))
         )
@@ -132,6 +153,4 @@ def load_frame(frame: Frame) -> Frame:
     """A lazily listed dataset Frame with its image read (or its error)."""
     if frame.image is not None or frame.error is not None:
         return frame
-    image = read_image(Path(frame.name), cv2.IMREAD_COLOR)
-    error = None if image is not None else f"cannot read image: {why_unreadable(Path(frame.name))}"
-    return Frame(frame.name, image, error, frame.camera, frame.key, frame.box)
+    return _read(frame)
