@@ -15,7 +15,7 @@ from harness import parser, run_script
 
 from scgen.render.camera.characterise import photon_transfer
 from scgen.render.camera.sensor import conversion_gain
-from scgen.scenes.camera_config import preset_settings
+from scgen.scenes.config.camera import preset_settings
 
 CASES = (("default", 1.0), ("default", 4.0), ("default", 16.0), ("speedplus", 1.0), ("speedplus", 8.0))
 

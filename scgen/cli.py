@@ -203,7 +203,7 @@ def render(
     overrides = {"background": {"user_dir": str(backgrounds_dir)}} if backgrounds_dir else {}
     if backgrounds_dir and backgrounds_dir.is_dir():  # each image decoded before any sample is rendered
         from scgen.io.image_file import check_images
-        from scgen.scenes.config import USER_IMAGE_SUFFIXES
+        from scgen.scenes.config.scene import USER_IMAGE_SUFFIXES
 
         images = sorted(p for p in backgrounds_dir.iterdir() if p.suffix.lower() in USER_IMAGE_SUFFIXES)
         check_images(images, "background image")

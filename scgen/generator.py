@@ -57,7 +57,7 @@ class Generator:
     ) -> Generator:  # fmt: skip
         """From files, as `scgen render` reads them: a mesh (None: the bundled spacecraft) and a config.
 
-        `camera` names a camera preset (scgen.scenes.camera_config); `render` takes the renderer
+        `camera` names a camera preset (scgen.scenes.config.camera); `render` takes the renderer
         settings: backend, quality, device, threads.
         """
         cfg = load_config(config, overrides, resolution, camera)

@@ -114,7 +114,7 @@ def save_png(sheet: np.ndarray, path: Path) -> None:
 def build_preview(generator: Generator, n: int, progress: bool = False) -> np.ndarray:
     """Sample, render and annotate samples 0..n-1 exactly as `scgen render` does; return the sheet (with
     `progress`, a bar per sample: ~1 s each at 320x240)."""
-    from scgen.scenes.config import distance_range_m
+    from scgen.scenes.config.scene import distance_range_m
 
     lo, hi = generator.model.mesh.bounds
     d_lo, d_hi = distance_range_m(generator.cfg, generator.model.diameter)

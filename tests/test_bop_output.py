@@ -27,7 +27,7 @@ from scgen.dataset.writer import WriteOptions, finalize
 from scgen.io import bop
 from scgen.io.exr import read_xyz_exr
 from scgen.render.base import create_backend
-from scgen.scenes.config import distance_range_m
+from scgen.scenes.config.scene import distance_range_m
 from scgen.scenes.geometry import project
 from scgen.scenes.model import load_target
 from scgen.scenes.spec import CameraSpec, SceneSpec

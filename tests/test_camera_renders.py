@@ -23,7 +23,7 @@ from scgen.generator import Generator
 from scgen.io import bop
 from scgen.io.exr import read_xyz_exr
 from scgen.run.runner import RenderJob, run_render
-from scgen.scenes.camera_config import camera_preset
+from scgen.scenes.config.camera import camera_preset
 from scgen.scenes.spec import CameraSpec
 
 BEFORE = Path(__file__).parent / "data" / "rgb_before_camera_stage.json"  # its images: BEFORE's folder

@@ -19,7 +19,7 @@ from scgen.render.camera.exposure import exposure_shift_ev, luminance
 from scgen.render.camera.lens import render_camera, to_camera
 from scgen.render.camera.sensor import bloom_columns, conversion_gain, expose, shot_noise
 from scgen.scenes import load_config
-from scgen.scenes.camera_config import camera_preset, preset_settings
+from scgen.scenes.config.camera import camera_preset, preset_settings
 from scgen.scenes.lens import distort, undistort
 from scgen.scenes.spec import CameraSpec, SunSpec
 

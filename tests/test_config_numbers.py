@@ -14,7 +14,7 @@ from posenet.errors import PosenetError
 from scgen.cli import main
 from scgen.errors import ScgenError
 from scgen.io import load_yaml
-from scgen.scenes.config import load_config as load_scene_config
+from scgen.scenes.config.scene import load_config as load_scene_config
 
 
 def test_exponent_floats_are_floats_and_nothing_else_changes():

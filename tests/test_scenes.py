@@ -11,7 +11,7 @@ from scgen.errors import ScgenError
 from scgen.generator import Generator
 from scgen.render.camera.glare import FLARE_REACH_RAD, sun_view
 from scgen.scenes import SceneSpec, load_config
-from scgen.scenes.config import distance_range_m
+from scgen.scenes.config.scene import distance_range_m
 
 
 def test_same_seed_same_spec_and_json_round_trip(spacecraft):

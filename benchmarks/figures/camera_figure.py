@@ -23,7 +23,7 @@ from harness import ROOT, parser, run_script
 
 from scgen import Generator
 from scgen.scenes import load_config
-from scgen.scenes.camera_config import CameraSettings
+from scgen.scenes.config.camera import CameraSettings
 from scgen.scenes.imaging import sample_imaging
 from scgen.scenes.rng import factor_rng
 from scgen.scenes.spec import CameraSpec, SunSpec

@@ -31,7 +31,7 @@ from scgen.io.bop import read_json
 from scgen.io.buffers import Buffers, CameraRecord
 from scgen.io.exr import encode_xyz_exr
 from scgen.scenes.attitude import CONE_COLUMNS
-from scgen.scenes.config import distance_range_m
+from scgen.scenes.config.scene import distance_range_m
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SEQUENCE_COLUMNS, SceneSpec
 

@@ -1,6 +1,6 @@
 """The camera presets (`--camera NAME`, a config's `camera.preset`) and the geometry of the default camera.
 
-Each preset overrides the default camera key by key (scgen.scenes.camera_config builds, types and checks
+Each preset overrides the default camera key by key (scgen.scenes.config.camera builds, types and checks
 the full table). They sit on scgen's bottom floor so that a pose predictor reads a preset's camera,
 `preset_intrinsics`, through scgen.io (`posenet predict --camera speedplus`).
 """
@@ -11,8 +11,9 @@ from typing import Any
 
 from scgen.errors import ScgenError
 
-# the default camera's geometry (camera_config.CameraSettings' defaults): a 640x480 image, a 56 deg
-# horizontal field of view, the principal point at the image centre (None: (size - 1) / 2), no distortion
+# the default camera's geometry (scgen.scenes.config.camera.CameraSettings' defaults): a 640x480 image, a
+# 56 deg horizontal field of view, the principal point at the image centre (None: (size - 1) / 2), no
+# distortion
 DEFAULT_INTRINSICS: dict[str, Any] = {
     "width": 640,  # px
     "height": 480,  # px

@@ -52,7 +52,7 @@ class RenderJob:
     model_path: Path | None = None
     keep_scale: bool = False
     config_path: Path | None = None
-    camera: str | None = None  # camera preset (scgen.scenes.camera_config)
+    camera: str | None = None  # camera preset (scgen.scenes.config.camera)
     overrides: dict[str, Any] = field(default_factory=dict)
     resolution: tuple[int, int] | None = None
     split_by: str = "factors"

@@ -1,6 +1,6 @@
 """Scene sampling: SceneSpec data, per-factor random streams, config. No renderer imports here."""
 
-from scgen.scenes.config import load_config
+from scgen.scenes.config.scene import load_config
 from scgen.scenes.sampler import sample_scene
 from scgen.scenes.silhouette import TargetShape
 from scgen.scenes.spec import SceneSpec

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from scgen.errors import ScgenError
-from scgen.scenes.checks import check_choice, check_range, is_number
+from scgen.scenes.config.checks import check_choice, check_range, is_number
 from scgen.scenes.geometry import quat_to_matrix, random_rotation
 
 POSE_DISTRIBUTIONS = ("uniform", "cone")

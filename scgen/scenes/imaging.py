@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scgen.scenes.camera_config import CameraSettings, SensorSettings, preset_settings
+from scgen.scenes.config.camera import CameraSettings, SensorSettings, preset_settings
 from scgen.scenes.spec import ImagingSpec
 
 IDEAL_IMAGING = ImagingSpec(0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 95, 0, preset_settings("ideal"))  # no draws

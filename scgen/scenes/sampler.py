@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 
 from scgen.scenes.attitude import sample_attitude
-from scgen.scenes.camera_config import CameraSettings
-from scgen.scenes.config import USER_BACKGROUND, distance_range_m
+from scgen.scenes.config.camera import CameraSettings
+from scgen.scenes.config.scene import USER_BACKGROUND, distance_range_m
 from scgen.scenes.finish import sample_finish
 from scgen.scenes.geometry import (
     backproject,

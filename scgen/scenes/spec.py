@@ -13,7 +13,7 @@ import numpy as np
 
 from scgen.io import bop
 from scgen.scenes.attitude import ConeDraw
-from scgen.scenes.camera_config import CameraSettings
+from scgen.scenes.config.camera import CameraSettings
 from scgen.scenes.geometry import focal_length, project
 from scgen.scenes.lens import distort, is_pinhole, undistort
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from scgen.render.camera.sensor import expose
-from scgen.scenes.camera_config import SensorSettings
+from scgen.scenes.config.camera import SensorSettings
 from scgen.scenes.imaging import electrons_per_value
 
 PTC_STEPS = 10

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from scgen.render.conventions import LUMA
-from scgen.scenes.camera_config import ExposureSettings
+from scgen.scenes.config.camera import ExposureSettings
 
 LUMA_32 = LUMA.astype(np.float32)  # float32 images stay float32
 CLIP_MARGIN_EV = 1e-5  # keeps the (k+1)-th brightest pixel below 1 after float32 rounding

@@ -15,7 +15,7 @@ import numpy as np
 from scgen.render.camera import optics
 from scgen.render.conventions import LUMA
 from scgen.render.lighting import SOLAR_CONSTANT
-from scgen.scenes.camera_config import GlareSettings
+from scgen.scenes.config.camera import GlareSettings
 from scgen.scenes.spec import CameraSpec, SceneSpec
 
 SUN_ANGULAR_RADIUS = np.deg2rad(0.2666)  # at 1 AU

@@ -12,7 +12,7 @@ import functools
 
 import numpy as np
 
-from scgen.scenes.camera_config import SensorSettings
+from scgen.scenes.config.camera import SensorSettings
 from scgen.scenes.imaging import electrons_per_value
 
 POISSON_EXACT_BELOW = 30.0  # mean electrons; above it the normal approximation (same mean and variance)

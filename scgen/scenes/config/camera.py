@@ -16,7 +16,7 @@ from typing import Any
 
 from scgen.errors import ScgenError
 from scgen.io.camera_presets import DEFAULT_INTRINSICS, preset_entry
-from scgen.scenes.checks import check_choice, check_positive, check_prob, check_range
+from scgen.scenes.config.checks import check_choice, check_positive, check_prob, check_range
 
 Range = tuple[float, float]  # [min, max], drawn uniformly per image
 

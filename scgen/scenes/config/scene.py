@@ -18,8 +18,8 @@ import yaml
 from scgen.errors import ScgenError
 from scgen.io.yaml_file import NUMBER_FORM, load_yaml
 from scgen.scenes.attitude import check_pose
-from scgen.scenes.camera_config import DEFAULT_CAMERA, camera_preset, check_camera, scale_pixel_sizes
-from scgen.scenes.checks import check_prob, check_range, is_number
+from scgen.scenes.config.camera import DEFAULT_CAMERA, camera_preset, check_camera, scale_pixel_sizes
+from scgen.scenes.config.checks import check_prob, check_range, is_number
 from scgen.scenes.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
 from scgen.scenes.finish import FINISH_MODES
 from scgen.scenes.motion.sequence import check_sequence, merge_sequence
@@ -32,7 +32,7 @@ USER_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 # Every key is documented in docs/config.md.
 DEFAULT_CONFIG: dict[str, Any] = {
-    "camera": DEFAULT_CAMERA,  # scgen.scenes.camera_config: intrinsics, lens, exposure, optics, sensor
+    "camera": DEFAULT_CAMERA,  # scgen.scenes.config.camera: intrinsics, lens, exposure, optics, sensor
     "distance": {
         # projected diameter range (px) that sets the default distance range; range_m overrides it
         "min_px": 60.0,

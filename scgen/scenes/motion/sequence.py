@@ -20,8 +20,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from scgen.errors import ScgenError
-from scgen.scenes.camera_config import CameraSettings
-from scgen.scenes.checks import check_range, is_number
+from scgen.scenes.config.camera import CameraSettings
+from scgen.scenes.config.checks import check_range, is_number
 from scgen.scenes.finish import sample_finish
 from scgen.scenes.imaging import sample_imaging
 from scgen.scenes.motion.orbit import (
