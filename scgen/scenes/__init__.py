@@ -1,4 +1,5 @@
-"""Scene sampling: SceneSpec data, per-factor random streams, config. No renderer imports here."""
+"""Scene sampling: SceneSpec data, per-factor random streams (here), the configuration (config/) and
+rendezvous motion (motion/). No renderer imports here."""
 
 from scgen.scenes.config.scene import load_config
 from scgen.scenes.sampler import sample_scene
