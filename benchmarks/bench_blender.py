@@ -1,11 +1,15 @@
-"""Blender backend benchmark: speed per annotated sample, time outside Cycles, RSS, naive rebuild, presets.
+"""Blender backend benchmark: speed per annotated sample, time outside Cycles, RSS, naive rebuild, presets,
+each for the old path (Cycles traces the full frame) beside the new (only the region the objects cover).
 
-One worker renders `--frames` sampled scenes (640x480 by default) with one persistent backend,
-annotating and writing each sample as `scgen render` does; then `--naive-frames` of the same
-scenes with a backend rebuilt for every frame; then the quality presets against a many-sample
-reference (PSNR over the rendered objects, so the composited background does not inflate it).
+First `--profile` samples timed by stage (Cycles' sync, BVH, path tracing, denoising, EXR; the aux
+render, labels, background, camera stage, annotation, writing). Then one worker renders `--frames`
+sampled scenes (640x480 by default) with one persistent backend, annotating and writing each sample as
+`scgen render` does, each scene once per mode in turn (A B A B); then `--naive-frames` of the same
+scenes with a backend rebuilt for every frame; then the quality presets in both modes against a
+many-sample full-frame reference (PSNR over the rendered objects, so the composited background does not
+inflate it).
 
-    .venv/bin/python benchmarks/bench_blender.py                      # 30 frames, naive, presets
+    .venv/bin/python benchmarks/bench_blender.py                      # profile, 30 frames, naive, presets
     .venv/bin/python benchmarks/bench_blender.py --frames 300 --naive-frames 0 --preset-frames 0
 """
 
@@ -40,29 +44,119 @@ def rss_mb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def persistent_run(generator: Generator, specs: list[SceneSpec], quality: str) -> dict:
-    """Render, annotate and write every spec with one backend; per-frame times and RSS."""
+MODES = {"full frame": False, "region": True}  # BlenderBackend.trace_region: the old path, then the new
+
+
+def persistent_run(generator: Generator, specs: list[SceneSpec], quality: str) -> dict[str, dict]:
+    """Render, annotate and write every spec with one backend, once per mode in turn (A B A B, so the
+    machine's drift hits both alike); per mode the per-frame times, Cycles' seconds and RSS."""
     backend = BlenderBackend(generator.model, quality=quality)
-    render_s, sample_s, rss = [], [], {}
+    runs = {m: {"render_s": [], "sample_s": [], "share": [], "cycles": 0.0, "rss": {}} for m in MODES}
+    with tempfile.TemporaryDirectory(prefix="bench-blender-") as out:
+        layouts = {m: Layout(f"{out}/{k}") for k, m in enumerate(MODES)}
+        for layout in layouts.values():
+            write_static_files(layout, generator)
+        for k, spec in enumerate(specs, start=1):
+            for mode, trace_region in MODES.items():
+                r, backend.trace_region = runs[mode], trace_region
+                t0, c0 = time.perf_counter(), backend.cycles_s
+                buffers = backend.render(spec)
+                t1 = time.perf_counter()
+                write_sample(layouts[mode], spec, buffers, annotate(spec, buffers), "train", WriteOptions())
+                r["render_s"].append(t1 - t0)
+                r["sample_s"].append(time.perf_counter() - t0)
+                r["cycles"] += backend.cycles_s - c0
+                r["share"].append(backend.scene.region.share)
+                if k in (10, len(specs)):
+                    r["rss"][k] = rss_mb()
+            if k % 50 == 0:
+                print(f"  frame {k}: RSS {rss_mb():.0f} MB", flush=True)
+    backend.close()
+    return runs
+
+
+def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) -> dict[str, dict[str, float]]:
+    """Median seconds per stage of one sample, per mode (A B A B). Cycles' own progress reports
+    (bpy.app.handlers.render_stats) split its render calls into scene sync, BVH build, path tracing
+    (denoising included) and the EXR write; denoising's share is the same beauty render again without
+    the denoiser; the Python stages are timed around the backend's calls."""
+    import bpy
+
+    import scgen.render.blender.backend as blender_backend
+
+    backend = BlenderBackend(generator.model, quality=quality)
+    scene = backend.scene
+    stamps: list[tuple[float, str]] = []
+    bpy.app.handlers.render_stats.append(lambda stats: stamps.append((time.perf_counter(), stats)))
+    times: dict[str, dict[str, list[float]]] = {m: {} for m in MODES}
+
+    def cycles_stages(t_call: float, t_end: float) -> dict[str, float]:
+        """Cycles' stages of the render calls since t_call, from its progress reports."""
+        out = dict.fromkeys(("Cycles: scene sync", "Cycles: BVH", "Cycles: path tracing + denoising"), 0.0)
+        marks = [(t, msg.split("|")[-1].strip()) for t, msg in stamps] + [(t_end, "end")]
+        for (t0, msg), (t1, _) in zip(marks, marks[1:], strict=False):
+            if msg.startswith("Sample"):
+                out["Cycles: path tracing + denoising"] += t1 - t0
+            elif "BVH" in msg and "Copying" not in msg:
+                out["Cycles: BVH"] += t1 - t0
+            elif not msg.startswith(("Finished", "Time")):
+                out["Cycles: scene sync"] += t1 - t0
+        out["Cycles: EXR write + read, paste"] = t_end - t_call - sum(out.values())
+        return out
+
+    def timed(stage: str, mode: str, fn, *a, **kw):
+        t0 = time.perf_counter()
+        result = fn(*a, **kw)
+        times[mode].setdefault(stage, []).append(time.perf_counter() - t0)
+        return result
+
+    def add(mode: str, stages: dict[str, float]) -> None:
+        for stage, seconds in stages.items():
+            times[mode].setdefault(stage, []).append(seconds)
+
     with tempfile.TemporaryDirectory(prefix="bench-blender-") as out:
         layout = Layout(out)
         write_static_files(layout, generator)
-        t_start = time.perf_counter()
-        for k, spec in enumerate(specs, start=1):
-            t0 = time.perf_counter()
-            buffers = backend.render(spec)
-            t1 = time.perf_counter()
-            write_sample(layout, spec, buffers, annotate(spec, buffers), "train", WriteOptions())
-            render_s.append(t1 - t0)
-            sample_s.append(time.perf_counter() - t0)
-            if k in (10, len(specs)):
-                rss[k] = rss_mb()
-            if k % 50 == 0:
-                print(f"  frame {k}: RSS {rss_mb():.0f} MB", flush=True)
-        total = time.perf_counter() - t_start
-    cycles = backend.cycles_s
+        for spec in specs:
+            for mode, trace_region in MODES.items():
+                backend.trace_region = trace_region
+                t_sample = time.perf_counter()
+                timed("scene update (matrices, props)", mode, scene.update, spec)
+                region = timed("region", mode, backend.region, spec)
+                scene.set_region(region)
+                stamps.clear()
+                t0 = time.perf_counter()
+                beauty = scene.render_beauty()
+                beauty_stages = cycles_stages(t0, time.perf_counter())
+                stamps.clear()
+                instance, depth = blender_backend.instance_and_depth(beauty)
+                alone = blender_backend.props_may_hide_target(spec, backend._hull, instance, depth)
+                aux = timed("aux render (labels)", mode, scene.render_aux, alone)
+                buffers = timed("label passes", mode, blender_backend.buffers_from_passes, spec, beauty, aux)
+                background = timed("background", mode, blender_backend.background_image, spec)
+                image = timed("composite", mode, blender_backend.composite, beauty, background)
+                buffers.rgb, buffers.camera = timed(
+                    "camera stage", mode, blender_backend.record_image, spec, image, buffers.instance
+                )
+                annotation = timed("annotation", mode, annotate, spec, buffers)
+                timed(
+                    "writing", mode, write_sample, layout, spec, buffers, annotation, "train", WriteOptions()
+                )
+                times[mode].setdefault("sample (total)", []).append(time.perf_counter() - t_sample)
+                scene.beauty.cycles.use_denoising = False
+                t0 = time.perf_counter()
+                scene.render_beauty()
+                plain = cycles_stages(t0, time.perf_counter())["Cycles: path tracing + denoising"]
+                scene.beauty.cycles.use_denoising = PRESETS[quality].denoise_quality is not None
+                stamps.clear()
+                denoise = beauty_stages["Cycles: path tracing + denoising"] - plain
+                add(
+                    mode,
+                    {**{f"beauty {k}": v for k, v in beauty_stages.items()}, "of which denoising": denoise},
+                )
+                add(mode, {"pixels traced (share of frame)": region.share})
     backend.close()
-    return {"render_s": render_s, "sample_s": sample_s, "total": total, "cycles": cycles, "rss": rss}
+    return {m: {stage: statistics.median(v) for stage, v in t.items()} for m, t in times.items()}
 
 
 def naive_run(model: TargetModel, specs: list[SceneSpec], quality: str) -> list[float]:
@@ -85,8 +179,9 @@ def foreground_psnr(rgb: np.ndarray, ref: np.ndarray, instance: np.ndarray) -> f
 
 
 def preset_run(model: TargetModel, specs: list[SceneSpec], ref_samples: int) -> list[tuple]:
-    """(preset, seconds per frame, mean PSNR against a `ref_samples`-spp reference) per preset."""
-    backend = BlenderBackend(model)
+    """(preset, mode, seconds per frame, mean PSNR against a `ref_samples`-spp full-frame reference) per
+    preset and mode, the modes in turn on each scene."""
+    backend = BlenderBackend(model, region=False)
     configure_beauty(backend.scene.beauty, QualityPreset(ref_samples, 0.001, 8, 4, 4, None), gpu=False)
     refs = [backend.render(s) for s in specs]
     backend.close()
@@ -94,32 +189,55 @@ def preset_run(model: TargetModel, specs: list[SceneSpec], ref_samples: int) -> 
     for name in PRESETS:
         backend = BlenderBackend(model, quality=name)
         backend.render(specs[0])  # warm-up: first sync and kernel load
-        times, psnrs = [], []
+        times: dict[str, list[float]] = {m: [] for m in MODES}
+        psnrs: dict[str, list[float]] = {m: [] for m in MODES}
         for spec, ref in zip(specs, refs, strict=True):
-            t0 = time.perf_counter()
-            buffers = backend.render(spec)
-            times.append(time.perf_counter() - t0)
-            psnrs.append(foreground_psnr(buffers.rgb, ref.rgb, ref.instance))
+            for mode, trace_region in MODES.items():
+                backend.trace_region = trace_region
+                t0 = time.perf_counter()
+                buffers = backend.render(spec)
+                times[mode].append(time.perf_counter() - t0)
+                psnrs[mode].append(foreground_psnr(buffers.rgb, ref.rgb, ref.instance))
         backend.close()
-        rows.append((name, statistics.mean(times), statistics.mean(psnrs)))
+        rows += [(name, m, statistics.mean(times[m]), statistics.mean(psnrs[m])) for m in MODES]
     return rows
 
 
-def report_persistent(r: dict, frames: int) -> None:
-    per_sample = r["total"] / frames
-    rss = ", ".join(f"after frame {k}: {v:.0f}" for k, v in r["rss"].items())
-    print(f"\npersistent scene, {frames} annotated samples written in {r['total']:.1f} s")
-    print(f"  images/s                       {frames / r['total']:.3f}")
-    print(f"  s per annotated sample         {per_sample:.2f}")
-    print(f"  median render() s              {statistics.median(r['render_s']):.2f}")
-    print(f"  outside Cycles' render calls   {100 * (1 - r['cycles'] / r['total']):.1f} % of the wall time")
-    print(f"  BlenderProc ({BLENDERPROC_S} s) / this  {BLENDERPROC_S / per_sample:.2f}x")
-    print(f"  RSS (MB)                       {rss}")
+def report_persistent(runs: dict[str, dict], frames: int) -> None:
+    """The modes side by side: seconds per annotated sample (render, annotate, write) and what they give."""
+    names, mean, median = list(runs), statistics.mean, statistics.median
+    print(f"\npersistent scene, {frames} annotated samples per mode, the modes in turn (A B A B), one worker")
+    print(f"  {'':34s}" + "".join(f"{n:>12s}" for n in names))
+
+    def row(label: str, fmt: str, value) -> None:
+        print(f"  {label:34s}" + "".join(f"{value(runs[n]):12{fmt}}" for n in names))
+
+    row("s per annotated sample (mean)", ".3f", lambda r: mean(r["sample_s"]))
+    row("s per annotated sample (median)", ".3f", lambda r: median(r["sample_s"]))
+    row("median render() s", ".3f", lambda r: median(r["render_s"]))
+    row("images/s", ".3f", lambda r: 1 / mean(r["sample_s"]))
+    row("outside Cycles' render calls %", ".1f", lambda r: 100 * (1 - r["cycles"] / sum(r["sample_s"])))
+    row("pixels traced, median share %", ".1f", lambda r: 100 * median(r["share"]))
+    row(f"BlenderProc ({BLENDERPROC_S} s) / this", ".2f", lambda r: BLENDERPROC_S / mean(r["sample_s"]))
+    full, region = (mean(runs[n]["sample_s"]) for n in names)
+    print(f"  region / full frame: {region / full:.3f} of the time per sample")
+    for n in names:
+        rss = ", ".join(f"after frame {k}: {v:.0f}" for k, v in runs[n]["rss"].items())
+        print(f"  RSS (MB), {n}: {rss}")
+
+
+def report_profile(profile: dict[str, dict[str, float]], n: int) -> None:
+    names = list(profile)
+    print(f"\nstages of one sample, median of {n} samples per mode (A B A B), seconds")
+    print(f"  {'stage':40s}" + "".join(f"{m:>12s}" for m in names))
+    for stage in profile[names[0]]:
+        print(f"  {stage:40s}" + "".join(f"{profile[m][stage]:12.3f}" for m in names))
 
 
 def parse_args() -> argparse.Namespace:
     ap = parser(__doc__)
     ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--profile", type=int, default=3, help="samples profiled by stage (0: none)")
     ap.add_argument("--naive-frames", type=int, default=5)
     ap.add_argument("--preset-frames", type=int, default=3)
     ap.add_argument("--ref-samples", type=int, default=1024)
@@ -133,26 +251,29 @@ def run(args: argparse.Namespace) -> None:
 
     model = load_target()
     cfg = load_config(resolution=tuple(args.resolution))
-    n = max(args.frames, args.naive_frames, args.preset_frames)
+    n = max(args.frames, args.naive_frames, args.preset_frames, args.profile)
     generator = Generator(model, cfg, args.seed)
     specs = [generator.scene(i) for i in range(n)]
     width, height = args.resolution
     print(f"{model.name}: {len(model.mesh.faces)} triangles, {width}x{height}, {PRESETS[args.quality]}")
 
+    if args.profile:
+        report_profile(stage_profile(generator, specs[: args.profile], args.quality), args.profile)
+
     if args.frames:
-        r = persistent_run(generator, specs[: args.frames], args.quality)
-        report_persistent(r, args.frames)
+        runs = persistent_run(generator, specs[: args.frames], args.quality)
+        report_persistent(runs, args.frames)
         if args.naive_frames:
             naive = statistics.mean(naive_run(model, specs[: args.naive_frames], args.quality))
-            same = statistics.mean(r["render_s"][: args.naive_frames])
+            same = statistics.mean(runs["region"]["render_s"][: args.naive_frames])
             print(f"\nscene rebuilt per frame (naive) vs persistent, same {args.naive_frames} scenes:")
             print(f"  naive {naive:.2f} s/frame, persistent {same:.2f} s/frame: ratio {naive / same:.2f}x")
 
     if args.preset_frames:
         print(f"\npresets vs a {args.ref_samples}-spp reference, {args.preset_frames} scenes:")
-        print(f"  {'preset':8s} {'s/frame':>8s} {'PSNR dB':>8s}  settings")
-        for name, s, psnr in preset_run(model, specs[: args.preset_frames], args.ref_samples):
-            print(f"  {name:8s} {s:8.2f} {psnr:8.2f}  {PRESETS[name]}")
+        print(f"  {'preset':8s} {'mode':>10s} {'s/frame':>8s} {'PSNR dB':>8s}  settings")
+        for name, mode, s, psnr in preset_run(model, specs[: args.preset_frames], args.ref_samples):
+            print(f"  {name:8s} {mode:>10s} {s:8.2f} {psnr:8.2f}  {PRESETS[name]}")
 
 
 def main() -> None:

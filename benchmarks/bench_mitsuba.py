@@ -1,6 +1,7 @@
 """Mitsuba backend: the time per sample at two image sizes side by side, so the fixed part shows, with the
 kernels each sample launches and compiles; then, at 640x480, throughput, time outside the renderer, bytes
-per sample by file kind and the float16-vs-float32 xyz storage error.
+per sample by file kind and the float16-vs-float32 xyz storage error. First (--profile) a 640x480 sample's
+seconds by stage.
 
 Each size renders in a fresh worker process, as `scgen render` runs it (scgen.io.parent_watch.spawn_pool),
 with --threads renderer threads: one unless given, as a worker of `scgen render` renders
@@ -8,7 +9,7 @@ with --threads renderer threads: one unless given, as a worker of `scgen render`
 before they sleep, on cores the worker's own numpy work (backgrounds, the camera stage) then shares, and
 the images are not repeatable.
 Usage: python benchmarks/bench_mitsuba.py [--n 30] [--warmup 200] [--sizes 64x48,320x240] [--threads N]
-       [--full-n 30] [--out DIR]
+       [--full-n 30] [--profile 10] [--out DIR]
 """
 
 from __future__ import annotations
@@ -154,6 +155,54 @@ def full_size(n: int, quality: str, out: Path) -> None:
         print(f"    {name:<18s} {np.percentile(v, 99):.4f} / {v.max():.4f}")
 
 
+def stage_profile(n: int, quality: str, out: Path) -> None:
+    """Median seconds per stage of a 640x480 sample (after a warm-up that records the renders): the
+    backend's own steps, timed around its methods, then annotation and writing."""
+    import scgen.render.mitsuba.backend as mitsuba_backend
+
+    model = load_target()
+    backend = create_backend("mitsuba", model, quality=quality)
+    generator = Generator(model, load_config(), 0)
+    layout = Layout(out)
+    write_static_files(layout, generator)
+    times: dict[str, list[float]] = defaultdict(list)
+
+    def timed(owner: object, name: str, stage: str) -> None:
+        fn = getattr(owner, name)
+
+        def wrapper(*a, **kw):
+            t0 = time.perf_counter()
+            result = fn(*a, **kw)
+            times[stage].append(time.perf_counter() - t0)
+            return result
+
+        setattr(owner, name, wrapper)
+
+    stages = {"_fill": "meshes into slots", "_scene": "scene: BVH rebuild, lights",
+              "_passes": "label ray casts", "_render": "path tracing (frozen replay)"}  # fmt: skip
+    for name, stage in stages.items():
+        timed(backend, name, stage)
+    timed(mitsuba_backend, "background_image", "background")
+    timed(mitsuba_backend, "record_image", "camera stage")
+    for i in range(n + 5):
+        if i == 5:  # the first samples record the renders: not what a long run sees
+            times.clear()
+        spec = generator.scene(i)
+        t0 = time.perf_counter()
+        buffers = backend.render(spec)
+        t1 = time.perf_counter()
+        ann = annotate(spec, buffers)
+        t2 = time.perf_counter()
+        write_sample(layout, spec, buffers, ann, "train", WriteOptions())
+        t3 = time.perf_counter()
+        times["annotation"].append(t2 - t1)
+        times["writing"].append(t3 - t2)
+        times["sample (total)"].append(t3 - t0)
+    print(f"\nMitsuba stages of one 640x480 sample ({quality}), median of {n} after 5 warm-up samples, s")
+    for stage, values in times.items():
+        print(f"  {stage:32s} {np.median(values):8.3f}")
+
+
 def parse_args() -> argparse.Namespace:
     ap = parser(__doc__)
     ap.add_argument("--n", type=int, default=30, help="samples per size, side by side")
@@ -166,6 +215,7 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--sizes", default="64x48,320x240")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--full-n", type=int, default=30, help="samples at 640x480 (0: skip)")
+    ap.add_argument("--profile", type=int, default=10, help="640x480 samples profiled by stage (0: skip)")
     ap.add_argument("--quality", default="default")
     ap.add_argument("--threads", type=int, default=None, help="renderer threads per worker [one]")
     ap.add_argument("--out", type=Path, default=None)
@@ -174,7 +224,10 @@ def parse_args() -> argparse.Namespace:
 
 def run(args: argparse.Namespace) -> None:
     sizes = [(int(w), int(h)) for w, h in (s.split("x") for s in args.sizes.split(","))]
-    side_by_side(sizes, args.n, args.quality, args.seed, args.threads, args.warmup)
+    if args.profile:
+        stage_profile(args.profile, args.quality, Path(tempfile.mkdtemp()) / "profile")
+    if args.n:
+        side_by_side(sizes, args.n, args.quality, args.seed, args.threads, args.warmup)
     if args.full_n:
         full_size(args.full_n, args.quality, args.out or Path(tempfile.mkdtemp()) / "bench")
 

@@ -7,13 +7,15 @@ Two figures per configuration:
   long run such as 50,000 images converges to; contention between workers (cores, memory
   bandwidth, a shared GPU) slows each sample and so shows up here, start-up does not.
 
-With --repeat R the configurations run R times in turn (1, 2, 3, 1, 2, 3, ...) and each figure is
-the median, so a drift in the machine's speed hits every configuration alike. The first two
-configurations give the scaling ratio. On a GPU machine, e.g.:
+Each configuration runs twice in turn: Blender tracing the full frame (the old path, SCGEN_FULL_FRAME=1)
+and only the region the objects cover (the default); `--modes region` skips the old path. With --repeat R
+the configurations run R times in turn (1, 2, 3, 1, 2, 3, ...) and each figure is the median, so a drift
+in the machine's speed hits every configuration alike. The first two configurations give the scaling
+ratio. On a GPU machine, e.g.:
     python benchmarks/bench_workers.py --device gpu --runs 1x16 2x8 4x4 --n 64
 
 Usage: python benchmarks/bench_workers.py [--backend blender] [--n 16] [--quality default]
-       [--device auto|cpu|gpu] [--runs WxT ...] [--repeat R]
+       [--device auto|cpu|gpu] [--runs WxT ...] [--repeat R] [--modes full region]
 """
 
 from __future__ import annotations
@@ -27,13 +29,24 @@ from pathlib import Path
 
 from harness import parser, run_script
 
+from scgen.render.region import FULL_FRAME_ENV
 from scgen.run.runner import RenderJob, run_render
 
+MODES = {"full": "1", "region": ""}  # SCGEN_FULL_FRAME per mode, which the workers inherit
 
-def measure(job: RenderJob) -> tuple[float, float]:
-    """(wall images/s, steady-state images/s) of one run."""
+
+def measure(job: RenderJob, mode: str) -> tuple[float, float]:
+    """(wall images/s, steady-state images/s) of one run, in `mode` (a key of MODES)."""
+    before = os.environ.get(FULL_FRAME_ENV)
+    os.environ[FULL_FRAME_ENV] = MODES[mode]
     t0 = time.perf_counter()
-    summary = run_render(job, progress=False)
+    try:
+        summary = run_render(job, progress=False)
+    finally:
+        if before is None:
+            del os.environ[FULL_FRAME_ENV]
+        else:
+            os.environ[FULL_FRAME_ENV] = before
     wall = job.n / (time.perf_counter() - t0)
     per_sample = (summary["render_s"] + summary["other_s"]) / summary["rendered"]
     return wall, job.workers / per_sample
@@ -54,6 +67,7 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--runs", nargs="+", type=parse_run, default=None, metavar="WxT",
                     help="workers x threads per worker [1x1, {cores}x1, 1x{cores}]")  # fmt: skip
     ap.add_argument("--repeat", type=int, default=1, help="Rounds over all configurations; medians.")
+    ap.add_argument("--modes", nargs="+", choices=list(MODES), default=list(MODES), help="[full region]")
     return ap.parse_args()
 
 
@@ -61,14 +75,15 @@ def run(args: argparse.Namespace) -> None:
     cores = os.cpu_count() or 1
     runs = args.runs or [(1, 1), (cores, 1), (1, cores)]
     tmp = Path(tempfile.mkdtemp())
-    samples: dict[str, list[tuple[float, float]]] = {f"{w} worker(s) x {t} thread(s)": [] for w, t in runs}
+    names = {(w, t, m): f"{w} worker(s) x {t} thread(s), {m}" for w, t in runs for m in args.modes}
+    samples: dict[str, list[tuple[float, float]]] = {name: [] for name in names.values()}
     for r in range(args.repeat):
-        for (w, t), name in zip(runs, samples, strict=True):
+        for (w, t, mode), name in names.items():
             job = RenderJob(
-                out=tmp / f"r{r}w{w}t{t}", n=args.n, seed=0, backend=args.backend, quality=args.quality,
+                out=tmp / f"r{r}w{w}t{t}{mode}", n=args.n, seed=0, backend=args.backend, quality=args.quality,
                 device=args.device, workers=w, threads=t,
             )  # fmt: skip
-            samples[name].append(measure(job))
+            samples[name].append(measure(job, mode))
     rates = {
         name: (statistics.median(v[0] for v in vals), statistics.median(v[1] for v in vals))
         for name, vals in samples.items()
@@ -77,14 +92,23 @@ def run(args: argparse.Namespace) -> None:
         f"{args.backend} ({args.quality}, {args.device}, 640x480), {args.n} samples per run, {cores} cores,"
         f" median of {args.repeat}"
     )
-    print(f"  {'':<28s} {'wall img/s':>10s} {'steady img/s':>12s}")
+    print(f"  {'':<40s} {'wall img/s':>10s} {'steady img/s':>12s} {'wall s/img':>10s}")
     for name, (wall, steady) in rates.items():
-        print(f"  {name:<28s} {wall:10.3f} {steady:12.3f}")
+        print(f"  {name:<40s} {wall:10.3f} {steady:12.3f} {1 / wall:10.3f}")
+    if len(args.modes) == 2:
+        for w, t in runs:
+            old, new = (rates[names[w, t, m]] for m in ("full", "region"))
+            print(f"  {w}x{t}: region / full frame, wall {old[0] / new[0]:.3f}, steady {old[1] / new[1]:.3f}"
+                  " of the time per image")  # fmt: skip
     if len(runs) > 1 and runs[0] == (1, 1):
-        (one, many), k = list(rates.values())[:2], runs[1][0]
-        for label, i in (("wall", 0), ("steady", 1)):
-            ratio = many[i] / one[i]
-            print(f"  {label:<6s} scaling: {ratio:.2f}x with {k} workers = {ratio / k:.2f} of linear")
+        k = runs[1][0]
+        for mode in args.modes:
+            one, many = rates[names[(*runs[0], mode)]], rates[names[(*runs[1], mode)]]
+            for label, i in (("wall", 0), ("steady", 1)):
+                ratio = many[i] / one[i]
+                print(
+                    f"  {mode} {label:<6s} scaling: {ratio:.2f}x with {k} workers = {ratio / k:.2f} of linear"
+                )
 
 
 def main() -> None:
