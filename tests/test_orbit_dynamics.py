@@ -44,6 +44,7 @@ from scgen.scenes.motion.tumble import (
 
 ORBIT = Orbit(500e3)  # n = 1.107e-3 rad/s, period 94.6 min
 N = ORBIT.n
+EPS = np.finfo(np.float64).eps  # 2.2e-16
 
 
 def random_states(seed: int, k: int = 4) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -58,6 +59,7 @@ def random_states(seed: int, k: int = 4) -> list[tuple[np.ndarray, np.ndarray]]:
 
 def test_orbit_constants_give_the_known_low_orbit():
     # a 500 km circular orbit has a period of 94.6 min; the Earth's disc from there is 68.0 deg in radius
+    # (the tolerances: the rounding of the quoted figures)
     assert ORBIT.period / 60 == pytest.approx(94.62, abs=0.01)
     assert math.degrees(earth_angular_radius(ORBIT.a)) == pytest.approx(68.0, abs=0.05)
     alt = [draw_orbit(np.random.default_rng(s)).altitude_m for s in range(50)]
@@ -105,6 +107,7 @@ def test_hcw_is_linear_so_a_trajectory_scales_with_the_model():
     x0, v0 = random_states(2, 1)[0]
     r, v = hcw_state(x0, v0, N, t)
     r_k, v_k = hcw_state(0.002 * x0, 0.002 * v0, N, t)  # e.g. a 100 m spacecraft rendered as a 0.2 m model
+    # the same float operations on scaled inputs: equal to a few roundings (eps = 2.2e-16), 1e-12 is 4500 eps
     np.testing.assert_allclose(r_k, 0.002 * r, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(v_k, 0.002 * v, rtol=1e-12, atol=1e-15)
 
@@ -124,7 +127,7 @@ def test_a_vbar_hold_stays_put_and_an_rbar_point_does_not():
         assert not hold.thrust(N, t).any()
     # the same distance on R-bar at rest is no equilibrium: it drifts by 6 n x0 * t (12 pi x0 an orbit)
     r, _ = hcw_state(np.array([50.0, 0, 0]), np.zeros(3), N, ORBIT.period)
-    assert r[1] == pytest.approx(-12 * math.pi * 50.0, rel=1e-9)
+    assert r[1] == pytest.approx(-12 * math.pi * 50.0, rel=1e-9)  # sin/cos of n t ~ 2 pi: ~10 eps each
 
 
 def test_a_safety_ellipse_closes_after_an_orbit_never_drifts_and_never_crosses_vbar():
@@ -186,7 +189,8 @@ def test_a_forced_approach_closes_at_its_speed_and_its_thrust_closes_the_hcw_equ
         t = np.linspace(0.0, 1.5 * t_stop, 3001)
         r, v = approach.state(N, t)
         rng_m = np.linalg.norm(r, axis=1)
-        # a straight line towards the target at the closing speed, then held at the stop range
+        # a straight line towards the target at the closing speed, then held at the stop range (to rounding:
+        # a unit vector and a range of ~100 m good to a few eps relative; 1e-12 is ~5000 eps)
         np.testing.assert_allclose(r / rng_m[:, None], np.broadcast_to(direction, r.shape), atol=1e-12)
         np.testing.assert_allclose(rng_m, np.maximum(start - speed * t, stop), rtol=1e-12)
         # thrust + the free HCW acceleration = the motion's own acceleration (finite differences), away
@@ -221,6 +225,8 @@ def test_the_sun_is_fixed_in_inertial_space_and_turns_once_an_orbit_in_lvlh():
     sun = Sun(math.radians(30.0), math.radians(40.0))
     t = np.linspace(0.0, ORBIT.period, 1001)
     s = sun_direction_lvlh(sun, N, t)
+    # unit vectors through two 3x3 rotations: a few eps (2.2e-16) per component, so 1e-14 is ~50 eps; the
+    # unwrapped azimuth sums 1000 steps' roundings (~1e-13), 1e-9 bounds it with margin
     np.testing.assert_allclose(
         np.einsum("tij,tj->ti", lvlh_to_inertial(N, t), s), np.tile(sun.inertial(), (1001, 1)), atol=1e-14
     )
@@ -266,7 +272,9 @@ def props():
 
 
 def test_inertia_of_a_mesh_is_the_solids_and_an_open_mesh_says_it_used_its_hull(props):
-    # a solid box a x b x c: J / m = diag(b^2 + c^2, a^2 + c^2, a^2 + b^2) / 12 about its centre
+    # a solid box a x b x c: J / m = diag(b^2 + c^2, a^2 + c^2, a^2 + b^2) / 12 about its centre; the
+    # mesh integrals sum 12 triangles' O(1) terms, exact to ~100 eps (2e-14): 1e-12 below leaves margin, and
+    # the major axis from eigh is good to eps |J| / gap (gap 3/12 of |J| = 13/12: ~1e-15)
     box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
     box.apply_translation([0.3, -0.2, 0.1])
     mp = mass_properties(box)
@@ -293,6 +301,7 @@ def test_inertia_of_a_mesh_is_the_solids_and_an_open_mesh_says_it_used_its_hull(
     # the bundled model: closed parts but for a few open ones (antenna dishes), a small share of its mass
     assert props.source.startswith("mesh") and "open pieces" in props.source
     assert np.all(np.diff(props.principal_moments) > 0.05 * props.principal_moments[0])  # 3 distinct
+    # eigh's vectors are orthonormal to a few eps (|Q^T Q - I| <= p(n) eps), approx's default 1e-6 wider still
     np.testing.assert_allclose(props.principal_axes.T @ props.principal_axes, np.eye(3), atol=1e-12)
     assert np.linalg.det(props.principal_axes) == pytest.approx(1.0)
 
@@ -316,6 +325,7 @@ def test_a_torque_free_tumble_conserves_inertial_angular_momentum_and_energy(pro
         assert np.abs(T - T[0]).max() < 1e-8 * T[0]
         # ... while the body rate itself moves: it is a tumble, not a spin
         assert np.abs(w - w[0]).max() > 1e-3 * np.linalg.norm(w[0])
+        # rotation matrices from normalised quaternions: orthonormal to a few eps (2.2e-16) per entry
         np.testing.assert_allclose(
             np.einsum("tji,tjk->tik", track.R_ib, track.R_ib),
             np.broadcast_to(np.eye(3), (241, 3, 3)),
@@ -324,8 +334,10 @@ def test_a_torque_free_tumble_conserves_inertial_angular_momentum_and_energy(pro
 
 
 def angle_from(w: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """Angle (rad) between each body rate and the axis, either sense."""
-    return np.arccos(np.clip(np.abs(w @ axis) / np.linalg.norm(w, axis=-1), 0.0, 1.0))
+    """Angle (rad) between each body rate and the unit axis, either sense. atan2 of the cross and dot
+    products is good to a few eps at every angle; arccos of the cosine is not near 0, where a cosine one
+    ulp below 1 reads as arccos(1 - eps) = sqrt(2 eps) = 2.1e-8 rad."""
+    return np.arctan2(np.linalg.norm(np.cross(w, axis), axis=-1), np.abs(w @ axis))
 
 
 @pytest.mark.parametrize("which", ["minor", "major", "intermediate"])
@@ -379,6 +391,7 @@ def test_each_attitude_mode_turns_at_its_body_rate_and_holds_what_it_holds(props
             [[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]],
             atol=1e-5 * np.linalg.norm(w) + 1e-12,
         )
+        # held attitudes are products of exact rotations: equal to a few eps (2.2e-16) per entry
         if mode == "lvlh_hold":
             np.testing.assert_allclose(
                 track.R_lb, np.broadcast_to(track.R_lb[0], track.R_lb.shape), atol=1e-12
@@ -391,7 +404,15 @@ def test_each_attitude_mode_turns_at_its_body_rate_and_holds_what_it_holds(props
             np.testing.assert_allclose(track.R_lb[-1], track.R_lb[0], atol=1e-12)  # once around in LVLH
             assert np.abs(track.R_lb[1000] - track.R_lb[0]).max() > 1  # half an orbit: turned by 180 deg
         if mode == "spin":
-            assert min(angle_from(track.omega_body[:1], props.axis(a))[0] for a in ("minor", "major")) < 1e-12
+            # w is rate * (a principal axis): a rounding per component, so within 4 eps of that axis
+            w0 = track.omega_body[0]
+            assert min(angle_from(w0, props.axis(a)) for a in ("minor", "major")) < 4 * EPS
+            # and the spin is torque-free: w x J w (Euler's gyroscopic term) vanishes to eigh's residual,
+            # |J v - l v| <= p(n) eps |J| (backward stable; p(3) < 10 n), plus J w's and the cross's own
+            # roundings; by the sin-theta theorem w is then within 30 eps |J| / gap ~ 8e-14 rad of the
+            # exact principal axis (the moments' smallest gap is 0.088 |J|)
+            J = props.inertia
+            assert np.linalg.norm(np.cross(w0, J @ w0)) < 30 * EPS * props.principal_moments[-1] * (w0 @ w0)
             assert 0.5 <= math.degrees(np.linalg.norm(track.omega_body[0])) <= 5.0
     with pytest.raises(ScgenError, match="unknown attitude mode"):
         draw_attitude("wobble", np.random.default_rng(0))
