@@ -103,6 +103,26 @@ def test_same_config_and_seed_give_the_same_losses_whatever_ran_before(
     assert runs[0] == runs[1] and len(runs[0]) == 4
 
 
+def test_losses_read_back_every_log_every_steps_are_the_losses_of_every_step(
+    dataset_dir: Path, tmp_path: Path
+) -> None:
+    """The loop reads the losses back from the device every optim.log_every steps, several steps' rows in
+    one transfer (and the rest at the stop): the log holds the same rows as when every step is read."""
+    rows = {}
+    for every in (1, 3):
+        config = tmp_path / f"every{every}.yaml"
+        config.write_text(TINY.replace("ckpt_every: 100", f"ckpt_every: 100, log_every: {every}"))
+        run = tmp_path / f"every{every}"
+        code, out = posenet(
+            "train", "--data", dataset_dir, "--out", run, "--config", config, "--max-steps", 5
+        )
+        assert code == 0, out
+        lines = (run / "train_log.jsonl").read_text().splitlines()
+        rows[every] = [{k: v for k, v in json.loads(ln).items() if k != "step_s"} for ln in lines]
+    assert [r["step"] for r in rows[3]] == [1, 2, 3, 4, 5]
+    assert rows[3] == rows[1]
+
+
 def test_a_step_cap_beyond_the_schedule_is_reported(
     dataset_dir: Path, tiny_config: Path, tmp_path: Path
 ) -> None:

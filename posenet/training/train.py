@@ -20,7 +20,7 @@ from typing import Any
 import cv2
 import torch
 import torch.distributed as dist
-from timm.optim import create_optimizer_v2
+from timm.optim import param_groups_weight_decay
 from torch.nn.parallel import DistributedDataParallel
 from torch.optim.lr_scheduler import LambdaLR
 from torch.utils.data import DataLoader
@@ -39,11 +39,11 @@ from posenet.models import PoseNet, create_model
 from posenet.training.amp import Precision
 from posenet.training.budget import PROBE_STEPS, TimeBudget, run_budget
 from posenet.training.losses import LOSS_TERMS, PmObject, pose_losses
+from posenet.training.ranger import Ranger
 from scgen.io import ScgenError, atomic_write_text, check_output, first_missing
 
 LOG_FILE = "train_log.jsonl"
 LAST = "last.pt"
-RANGER_BETAS = (0.95, 0.999)  # GDRNPP's Ranger; timm's Lookahead defaults (alpha 0.5, k 6) match it too
 
 
 def lr_factor(it: int, total: int, o: OptimConfig) -> float:
@@ -93,18 +93,14 @@ def before_loader_fork() -> None:
 def make_optimizer(
     model: torch.nn.Module, o: OptimConfig, total_iters: int | Callable[[], int]
 ) -> tuple[torch.optim.Optimizer, LambdaLR]:
-    """Ranger (timm's Lookahead over RAdam) and the per-iteration warmup + flat + cosine schedule over
-    `total_iters` steps (a callable: read at every step, for a schedule fitted while it runs)."""
-    optimizer = create_optimizer_v2(
-        model,
-        opt="lookahead_radam",
-        lr=o.lr,
-        weight_decay=o.weight_decay,
-        betas=RANGER_BETAS,
-        eps=o.eps,
-        decoupled_weight_decay=True,  # Ranger decays weights directly (p -= lr * wd * p)
-        filter_bias_and_bn=not o.decay_norms_biases,  # timm's no-decay group: biases and 1-d (norm) weights
+    """Ranger (posenet.training.ranger: RAdam + Lookahead on foreach kernels) and the per-iteration
+    warmup + flat + cosine schedule over `total_iters` steps (a callable: read at every step, for a
+    schedule fitted while it runs)."""
+    # timm's no-decay group for biases and 1-d (norm) weights unless they decay too
+    groups = param_groups_weight_decay(
+        model, o.weight_decay, weight_decay_exclude_1d=not o.decay_norms_biases
     )
+    optimizer = Ranger(groups, lr=o.lr, weight_decay=o.weight_decay, eps=o.eps)
     total = total_iters if callable(total_iters) else lambda: total_iters
     return optimizer, LambdaLR(optimizer, lambda it: lr_factor(it, total(), o))
 
@@ -578,8 +574,11 @@ def rank_weight_spread(model: torch.nn.Module) -> float:
 
 def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
     """The sampler's batches of `epoch` up to the stop step: one step each, losses averaged over the
-    processes and logged with the images the step took over all processes (the global batch)."""
+    processes and logged with the images the step took over all processes (the global batch). The
+    losses stay on the device and are read back every `optim.log_every` steps, all those steps' rows in
+    one transfer: the host never waits for a step it has queued."""
     tic = time.perf_counter()
+    pending: list[tuple[dict[str, Any], torch.Tensor]] = []  # logged rows whose losses are on the device
     for batch in run.loader:
         if run.startup is not None:
             run.startup.lap(
@@ -599,15 +598,29 @@ def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
         run.step += 1
         if run.budget is not None:
             _follow_budget(run, log)
-        images = torch.tensor([float(len(batch["roi_img"]))], device=values.device)
+        # (total, *terms, images): a fill on the device, not a copy from the host
+        values = torch.cat([values, torch.full((1,), float(len(batch["roi_img"])), device=values.device)])
         if run.world > 1:
             dist.all_reduce(values)
-            dist.all_reduce(images)
-            values /= run.world
+            values[:-1] /= run.world
         if log is not None:
             toc = time.perf_counter()
-            losses = dict(zip(("loss", *LOSS_TERMS), values.tolist(), strict=True)) | {"images": int(images)}
-            log.step({"step": run.step, "epoch": epoch, "lr": lr, "step_s": toc - tic, **losses})
+            pending.append(({"step": run.step, "epoch": epoch, "lr": lr, "step_s": toc - tic}, values))
             tic = toc
+            if run.step % run.cfg.optim.log_every == 0:
+                _write_rows(log, pending)
         if run.step >= run.stop:
             break
+    if log is not None:
+        _write_rows(log, pending)
+
+
+def _write_rows(log: RunLog, pending: list[tuple[dict[str, Any], torch.Tensor]]) -> None:
+    """Log the pending steps' rows, their (total, *terms, images) read back in one transfer; empties
+    `pending`."""
+    if not pending:
+        return
+    read = torch.stack([values for _, values in pending]).tolist()
+    for (row, _), (*losses, images) in zip(pending, read, strict=True):
+        log.step(row | dict(zip(("loss", *LOSS_TERMS), losses, strict=True)) | {"images": int(images)})
+    pending.clear()
