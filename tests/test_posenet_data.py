@@ -250,4 +250,12 @@ def test_a_truncated_image_is_refused_alike_by_train_train_detector_eval_and_box
         split = "train" if name.startswith("train") else "test"
         assert res.exit_code != 0 and res.output.count("\n") == 1, (name, res.output)
         assert res.output.startswith("Error: 1 of the ") and f"{cut[split]}: truncated" in res.output, name
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken"]
+    # a broken val image is refused too, not dropped from the detector's validation
+    broken_val = tmp_path / "broken_val"
+    shutil.copytree(dataset_dir, broken_val)
+    val_image = sorted(broken_val.glob("val/*/rgb/*"))[0]
+    val_image.write_bytes(val_image.read_bytes()[:200])
+    args = ["train-detector", "--data", broken_val, "--out", tmp_path / "det", "--max-steps", 1]
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    assert res.exit_code != 0 and f"{val_image}: truncated" in res.output, res.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken", "broken_val"]

@@ -64,6 +64,11 @@ def _has_gt(scene: Path) -> bool:
     return bop.scene_file(scene, "scene_gt").is_file()
 
 
+def split_scenes(root: Path, split: str) -> list[Path]:
+    """The scene folders of `root/split` that hold ground truth, in order (none: no such split)."""
+    return sorted(p for p in (root / split).glob("[0-9]*") if _has_gt(p))
+
+
 def scan_split(
     root: Path, split: str, obj_id: int, lens: bool = False, check_images: bool = True
 ) -> list[Instance]:
@@ -72,8 +77,7 @@ def scan_split(
     through a lens is refused unless `lens` (posenet's crops and SITE are pinhole; predict warps lenses
     away). With `check_images`, every image the instances name must be whole (check_whole)."""
     size = image_size(root)
-    split_dir = root / split
-    scenes = sorted(p for p in split_dir.glob("[0-9]*") if _has_gt(p))
+    scenes = split_scenes(root, split)
     if not scenes:
         found = sorted(
             p.name

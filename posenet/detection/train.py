@@ -21,6 +21,7 @@ from torch.utils.data import DataLoader
 from torchvision.models.detection import FCOS
 
 from posenet.checkpoint import load_checkpoint, save_checkpoint
+from posenet.data.layout import split_scenes
 from posenet.detection.detect import box_metrics, detect
 from posenet.detection.detector import (
     DetectionDataset,
@@ -117,11 +118,9 @@ def _train(
 
 
 def _val_images(data: Path, obj_id: int) -> list | None:
-    """The val split's images, or None when the dataset has no val split."""
-    try:
-        return image_groups(data, "val", obj_id) or None
-    except PosenetError:
-        return None
+    """The val split's images, or None when the dataset has no val split. A val image that is not whole is
+    refused as scan_split refuses it for every command, not dropped from validation."""
+    return (image_groups(data, "val", obj_id) or None) if split_scenes(data, "val") else None
 
 
 def _epoch(
