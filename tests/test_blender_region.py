@@ -21,9 +21,10 @@ import pytest
 from scgen.generator import Generator
 from scgen.io.buffers import Buffers
 from scgen.render.blender.backend import BlenderBackend
+from scgen.render.blender.scene import border_fractions
 from scgen.render.blender.settings import QualityPreset, configure_beauty
 from scgen.render.conventions import CLIP_START_M
-from scgen.render.region import covered_region, full_frame
+from scgen.render.region import Region, covered_region, full_frame
 from scgen.scenes.spec import Pose, SunSpec
 
 SIZE = (160, 120)
@@ -49,6 +50,16 @@ def test_region_is_the_whole_frame_when_an_object_reaches_the_near_plane_or_noth
     assert covered_region(K, *SIZE, [behind], 0.75, 0) == full_frame(*SIZE)
     outside = np.array([[-10.0, 0.0, 1.0], [-9.0, 1.0, 1.0]])
     assert covered_region(K, *SIZE, [outside], 0.75, 0) == full_frame(*SIZE)
+
+
+@pytest.mark.parametrize("size", [64, 120, 160, 480, 640, 1200, 1920, 4096, 8192])
+def test_border_fractions_give_every_pixel_edge_exactly(size):
+    """Blender takes a border edge as int(fraction * size), in float32: every edge of every region
+    comes back (a fraction of exactly edge / size lost a pixel to rounding for some: 169 rows for 168)."""
+    for e in range(size):  # a one-pixel region at every place: every edge from 0 to size, both axes
+        r = Region(e, e, e + 1, e + 1, size, size)
+        x0, x1, y0, y1 = (int(np.float32(f) * np.float32(size)) for f in border_fractions(r))
+        assert (x0, x1, y0, y1) == (e, e + 1, size - e - 1, size - e)
 
 
 @pytest.fixture(scope="module")

@@ -128,10 +128,8 @@ class BlenderScene:
         for scene in (self.beauty, self.aux):
             r = scene.render
             r.use_border = r.use_crop_to_border = not region.full
-            if not region.full:  # fractions of the frame, y from the bottom; Blender rounds them to pixels
-                W, H = region.width, region.height
-                r.border_min_x, r.border_max_x = region.x0 / W, region.x1 / W
-                r.border_min_y, r.border_max_y = (H - region.y1) / H, (H - region.y0) / H
+            if not region.full:
+                r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = border_fractions(region)
         self.region = region
 
     def render_beauty(self) -> dict[str, np.ndarray]:
@@ -241,6 +239,17 @@ class BlenderScene:
             self.earthshine.matrix_world = self._Matrix(light_matrix_world(direction).tolist())
             self.earthshine.data.energy = irradiance
             self.earthshine.data.angle = 2.0 * np.deg2rad(spec.background.params["angular_radius_deg"])
+
+
+def border_fractions(region: Region) -> tuple[float, float, float, float]:
+    """Blender's border for `region`: min x, max x, min y, max y as fractions of the frame, y from the
+    bottom. Blender truncates fraction x size (float32) to a pixel edge, so a fraction of exactly
+    edge / size can land one pixel short; each is given half a pixel past its edge instead, which float32
+    rounding (relative 6e-8, under 5e-4 px for any frame up to 8192 px) cannot carry across a pixel."""
+    W, H = region.width, region.height
+    x = [min(1.0, (edge + 0.5) / W) for edge in (region.x0, region.x1)]
+    y = [min(1.0, (edge + 0.5) / H) for edge in (H - region.y1, H - region.y0)]
+    return x[0], x[1], y[0], y[1]
 
 
 def set_triangles(mesh: Any, vertices: np.ndarray, faces: np.ndarray) -> None:
