@@ -96,11 +96,10 @@ def make_optimizer(
     """Ranger (posenet.training.ranger: RAdam + Lookahead on foreach kernels) and the per-iteration
     warmup + flat + cosine schedule over `total_iters` steps (a callable: read at every step, for a
     schedule fitted while it runs)."""
-    # timm's no-decay group for biases and 1-d (norm) weights unless they decay too
-    groups = param_groups_weight_decay(
-        model, o.weight_decay, weight_decay_exclude_1d=not o.decay_norms_biases
-    )
-    optimizer = Ranger(groups, lr=o.lr, weight_decay=o.weight_decay, eps=o.eps)
+    # timm's no-decay group for biases and 1-d (norm) weights, unless they decay too (the groups timm's
+    # create_optimizer_v2 made; its own keyword for the choice exists only in timm >= 1.0.26)
+    params = model.parameters() if o.decay_norms_biases else param_groups_weight_decay(model, o.weight_decay)
+    optimizer = Ranger(params, lr=o.lr, weight_decay=o.weight_decay, eps=o.eps)
     total = total_iters if callable(total_iters) else lambda: total_iters
     return optimizer, LambdaLR(optimizer, lambda it: lr_factor(it, total(), o))
 
