@@ -26,6 +26,8 @@ from posenet.geometry import (
 
 # torch's float64 kernels (matmul, det) on unit-norm rotations: each entry a few products of O(1) terms, so
 # good to ~10 eps = 2e-15; the 1e-12 bounds below leave 500x for another CPU's kernels.
+# The figures hang on those kernels: `make test` reruns the module under a second kernel set
+pytestmark = pytest.mark.numeric
 
 
 @pytest.fixture(scope="module")
