@@ -34,6 +34,7 @@ from scgen.io import NUMBER_FORM, load_yaml
 
 AMP_MODES = ("auto", "off", "bf16", "fp16")  # optim.amp: posenet.training.amp resolves them
 AUGMENTS = ("paper", "spnv2", "gdrnet-occlusion")  # data.augment: posenet.data.photometric's chains
+LOADERS = ("samples", "cache")  # data.loader: per-sample workers, or the packed cache with batch augmentation
 # what a value of each field type looks like in a config file, for the message of a wrongly typed one
 EXPECTED_FORM = {float: NUMBER_FORM, int: "a whole number such as 8", bool: "true or false", str: "a string"}
 
@@ -64,6 +65,10 @@ class DataConfig:
     # gdrnet-occlusion (applied with color_prob)
     augment: str = "paper"
     workers: int = 4  # DataLoader worker processes per training process
+    # samples: each worker decodes and augments whole samples (posenet.data.dataset); cache: a packed
+    # cache decoded once under DATA/.posenet_cache, the crop, background and colour applied to the whole
+    # batch on the training device (posenet.data.cache, batch_augment; augment 'paper', no truncate_fg)
+    loader: str = "samples"
     # > 0: train on this many images of the train split, the first of one fixed shuffled order, so that a
     # smaller set lies inside a larger one (accuracy against data: benchmarks/figures/posenet_data_curve.py)
     train_images: int = 0
@@ -255,6 +260,13 @@ def _validate(cfg: TrainConfig) -> None:
             raise PosenetError(f"data.{name} must lie in [0, 1], got {getattr(d, name)}")
     if d.augment not in AUGMENTS:
         raise PosenetError(f"data.augment must be one of {', '.join(AUGMENTS)}, got {d.augment!r}")
+    if d.loader not in LOADERS:
+        raise PosenetError(f"data.loader must be one of {', '.join(LOADERS)}, got {d.loader!r}")
+    if d.loader == "cache" and (d.augment != "paper" or d.truncate_fg):
+        raise PosenetError(
+            "data.loader 'cache' applies the paper's augmentations only (data.augment 'paper', "
+            "data.truncate_fg false): use data.loader 'samples' for the others"
+        )
     if cfg.loss.mask_type not in ("bce", "l1"):
         raise PosenetError(f"loss.mask_type must be 'bce' or 'l1', got {cfg.loss.mask_type!r}")
     if min(o.batch_size, o.epochs, o.log_every, o.ckpt_every) < 1 or o.lr <= 0 or o.eps <= 0:

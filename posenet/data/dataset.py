@@ -161,9 +161,14 @@ class PoseDataset(Dataset):
         if rng.random() >= self.cfg.bg_from_dataset or self.cfg.bg_pool_size == 0:
             return augment.noise_background(self.input_res, rng)
         if self._bg_pool is None:
-            pick = np.random.default_rng(self.seed).permutation(len(self.instances))[: self.cfg.bg_pool_size]
-            self._bg_pool = [self._target_free(self.instances[i]) for i in sorted(pick)]
+            self._bg_pool = [self._target_free(i) for i in self.bg_pool_instances()]
         return augment.random_view(self._bg_pool[int(rng.integers(len(self._bg_pool)))], self.input_res, rng)
+
+    def bg_pool_instances(self) -> list[Instance]:
+        """The instances whose target-free images make the background pool (data.bg_pool_size of them, a
+        fixed choice per seed): the per-sample path's pool and the cache path's (posenet.data.cache)."""
+        pick = np.random.default_rng(self.seed).permutation(len(self.instances))[: self.cfg.bg_pool_size]
+        return [self.instances[i] for i in sorted(pick)]
 
     @staticmethod
     def _target_free(inst: Instance) -> np.ndarray:

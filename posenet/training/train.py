@@ -31,6 +31,7 @@ import posenet
 from posenet.checkpoint import check_model_config, load_checkpoint, save_checkpoint
 from posenet.config import OptimConfig, TrainConfig, config_from_dict
 from posenet.data import EpochSampler, PoseDataset, open_split
+from posenet.data.cache import BatchLoader, cache_loader
 from posenet.data.camera import training_camera
 from posenet.data.layout import scan_split
 from posenet.data.object_model import ObjectModel
@@ -343,7 +344,9 @@ def _set_up(
         dataset=dataset,
         sampler=sampler,
         pm=pm_loss_points(dataset.obj, device),
-        loader=_loader(dataset, sampler, cfg.data.workers, device),
+        loader=_loader(
+            dataset, sampler, cfg.data.workers, device, data if cfg.data.loader == "cache" else None
+        ),
         device=device,
         precision=precision,
         world=world,
@@ -394,7 +397,7 @@ def summary_lines(
         + f"this run stops at step {stop}",
         f"device: {device.type}"
         + (f" ({threads} threads)" if threads else "")
-        + f", {d.workers} loader processes"
+        + f", {d.workers} loader processes ({d.loader} path)"
         + (f", {world} DDP processes" if world > 1 else "")
         + f"; precision: {precision.label} (optim.amp {o.amp})",
     ]
@@ -419,19 +422,26 @@ def check_run_folder(out: Path, resume: bool) -> None:
         raise PosenetError(f"--out {out} is not empty and holds no run ({LAST}): choose another --out")
 
 
-def _loader(dataset: PoseDataset, sampler: EpochSampler, workers: int, device: torch.device) -> DataLoader:
-    """Batches in the sampler's order; `workers` persistent single-threaded processes."""
+def _loader(
+    dataset: PoseDataset,
+    sampler: EpochSampler,
+    workers: int,
+    device: torch.device,
+    cache_root: Path | None = None,
+) -> DataLoader | BatchLoader:
+    """Batches in the sampler's order; `workers` persistent single-threaded processes. With `cache_root`
+    (data.loader 'cache'), from the packed cache there, augmented on `device` (posenet.data.cache)."""
     if workers > 0:
         before_loader_fork()
-    return DataLoader(
-        dataset,
-        batch_size=sampler.batch_size,
-        sampler=sampler,
-        num_workers=workers,
-        persistent_workers=workers > 0,
-        pin_memory=device.type == "cuda",
-        worker_init_fn=worker_init,
-    )
+    args = {
+        "num_workers": workers,
+        "persistent_workers": workers > 0,
+        "pin_memory": device.type == "cuda",
+        "worker_init_fn": worker_init,
+    }
+    if cache_root is not None:
+        return cache_loader(cache_root, dataset, sampler, args, device)
+    return DataLoader(dataset, batch_size=sampler.batch_size, sampler=sampler, **args)
 
 
 def stop_step(total: int, max_steps: int | None, epochs: int, per_epoch: int, announce: bool) -> int:
