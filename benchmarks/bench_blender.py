@@ -276,9 +276,5 @@ def run(args: argparse.Namespace) -> None:
             print(f"  {name:8s} {mode:>10s} {s:8.2f} {psnr:8.2f}  {PRESETS[name]}")
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

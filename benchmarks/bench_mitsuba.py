@@ -232,9 +232,5 @@ def run(args: argparse.Namespace) -> None:
         full_size(args.full_n, args.quality, args.out or Path(tempfile.mkdtemp()) / "bench")
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

@@ -138,9 +138,5 @@ def run(args: argparse.Namespace) -> None:
         print(pose_side_by_side(on_gt, on_det, groups))
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

@@ -133,9 +133,5 @@ def run(args: argparse.Namespace) -> None:
         plan(args.plan_n, args.seed)
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

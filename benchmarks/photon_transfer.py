@@ -32,9 +32,5 @@ def run(args: argparse.Namespace) -> None:
               f"{read_set:9.2f} {read_fit:9.2f} {100 * (read_fit / read_set - 1):5.1f}%")  # fmt: skip
 
 
-def main() -> None:
-    run_script(run, parser(__doc__).parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parser(__doc__).parse_args())

@@ -140,9 +140,5 @@ def run(args: argparse.Namespace) -> None:
     print(f"wrote {args.out / 'ablation.json'}")
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

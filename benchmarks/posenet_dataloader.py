@@ -99,9 +99,5 @@ def run(args: argparse.Namespace) -> None:
             )
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

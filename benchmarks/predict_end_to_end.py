@@ -187,9 +187,5 @@ def run(args: argparse.Namespace) -> None:
     print(table(report))
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

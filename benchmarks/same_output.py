@@ -92,9 +92,5 @@ def run(args: argparse.Namespace) -> None:
     sys.exit(1 if failed else 0)
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

@@ -40,9 +40,5 @@ def run(args: argparse.Namespace) -> None:
                   f"{dev:>10.2f}  {tuple(leak.values())}")  # fmt: skip
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

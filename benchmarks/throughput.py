@@ -270,10 +270,6 @@ def parse_args() -> argparse.Namespace:
     return args
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 def run(args: argparse.Namespace) -> None:
     data = args.data
     if data is None:
@@ -424,4 +420,4 @@ def step_lines(
 
 
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

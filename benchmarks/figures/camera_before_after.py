@@ -130,9 +130,5 @@ def run(args: argparse.Namespace) -> None:
     print(f"wrote {args.out} ({figure.shape[1]}x{figure.shape[0]})")
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

@@ -104,9 +104,5 @@ def run(args: argparse.Namespace) -> None:
     print(f"wrote {out}")
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

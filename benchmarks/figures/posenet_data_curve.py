@@ -142,9 +142,5 @@ def run(args: argparse.Namespace) -> list[dict[str, Any]]:
     return points
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

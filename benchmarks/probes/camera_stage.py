@@ -73,9 +73,5 @@ def run(args: argparse.Namespace) -> None:
                   f"{100 * stage_ms / sample_ms:5.1f}%")  # fmt: skip
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

@@ -72,9 +72,5 @@ def run(args: argparse.Namespace) -> None:
         print(f"detector train step ({args.config}, batch {bs}, {device.type}, {what}): {1e3 * sec:.0f} ms")
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

@@ -85,9 +85,5 @@ def run(args: argparse.Namespace) -> None:
     print("PSNR: median over images, dB against the lossless image (8-bit)")
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

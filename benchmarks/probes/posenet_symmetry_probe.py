@@ -137,9 +137,5 @@ def run(args: argparse.Namespace) -> None:
         print(f"{step:>4}  " + "  ".join(f"{cell:>16}" for cell in cells))
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

@@ -139,9 +139,5 @@ def run(args: argparse.Namespace) -> None:
     print(f"wrote {args.out / 'recipe_details.json'}")
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())

@@ -88,9 +88,5 @@ def run(args: argparse.Namespace) -> None:
     time_backgrounds(resolution)
 
 
-def main() -> None:
-    run_script(run, parse_args())
-
-
 if __name__ == "__main__":
-    main()
+    run_script(run, parse_args())
