@@ -21,8 +21,9 @@ from posenet.cli import main
 from posenet.config import OptimConfig, load_config
 from posenet.data.layout import scan_split
 from posenet.training.budget import TimeBudget
-from posenet.training.train import lr_factor
+from posenet.training.train import lr_factor, throughput
 
+TIMES = ("step_s", "wait_s")  # what a log row measures of the wall clock; the rest is arithmetic
 TINY = """\
 preset: smoke
 model: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, fc_dims: [64, 32]}
@@ -118,7 +119,7 @@ def test_losses_read_back_every_log_every_steps_are_the_losses_of_every_step(
         )
         assert code == 0, out
         lines = (run / "train_log.jsonl").read_text().splitlines()
-        rows[every] = [{k: v for k, v in json.loads(ln).items() if k != "step_s"} for ln in lines]
+        rows[every] = [{k: v for k, v in json.loads(ln).items() if k not in TIMES} for ln in lines]
     assert [r["step"] for r in rows[3]] == [1, 2, 3, 4, 5]
     assert rows[3] == rows[1]
 
@@ -301,3 +302,11 @@ def test_an_unreadable_test_image_stops_evaluation_in_one_line(dataset_dir: Path
     assert code == 1 and len(errors) == 1 and "Traceback" not in out, out
     assert errors[0] == f"Error: cannot read image {bad}: truncated or not an image"
     assert not (tmp_path / "e.json").exists()
+
+
+def test_the_logged_rate_and_its_bound() -> None:
+    """Samples a second are the images over the rows' wall time; the loader bounds a run whose host waited
+    for batches more than half of it."""
+    rows = [{"images": 8, "step_s": 0.5, "wait_s": 0.3}, {"images": 8, "step_s": 0.3, "wait_s": 0.2}]
+    assert throughput(rows) == (16 / 0.8, "loader")
+    assert throughput([{**r, "wait_s": 0.1} for r in rows]) == (16 / 0.8, "step")

@@ -167,17 +167,25 @@ class RunLog:
         self.tb = SummaryWriter(str(out / "tb"))
         self.bar = tqdm(total=total, initial=step, desc="train", unit="step", dynamic_ncols=True)
         self.every = every
+        self.window: list[dict[str, Any]] = []  # the rows since the rate was last shown
 
     def step(self, row: dict[str, Any]) -> None:
         self.file.write(json.dumps(row) + "\n")
         self.file.flush()
         self.bar.update(1)
-        self.bar.set_postfix(loss=f"{row['loss']:.4f}", epoch=row["epoch"])
+        self.window.append(row)
+        if len(self.window) >= self.every:
+            rate, bound = throughput(self.window)
+            self.bar.set_postfix(
+                loss=f"{row['loss']:.4f}", epoch=row["epoch"], samples_s=f"{rate:.0f}", bound=bound
+            )
+            self.tb.add_scalar("samples_s", rate, row["step"])
+            self.window = []
         if row["step"] % self.every == 0:
             for key, value in row.items():
                 if key not in ("step", "epoch"):
                     self.tb.add_scalar(
-                        key if key in ("lr", "loss", "step_s", "images") else f"loss/{key}",
+                        key if key in ("lr", "loss", "step_s", "wait_s", "images") else f"loss/{key}",
                         value,
                         row["step"],
                     )
@@ -186,6 +194,14 @@ class RunLog:
         self.file.close()
         self.tb.close()
         self.bar.close()
+
+
+def throughput(rows: list[dict[str, Any]]) -> tuple[float, str]:
+    """Samples a second over logged rows (all processes' images over the wall time), and which stage bounds
+    it: `loader` when the host spent over half that time waiting for batches, else `step`."""
+    seconds = sum(r["step_s"] for r in rows)
+    waited = sum(r["wait_s"] for r in rows)
+    return sum(r["images"] for r in rows) / max(seconds, 1e-9), "loader" if waited > seconds / 2 else "step"
 
 
 def pm_loss_points(obj: ObjectModel, device: torch.device) -> PmObject:
@@ -589,6 +605,7 @@ def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
     tic = time.perf_counter()
     pending: list[tuple[dict[str, Any], torch.Tensor]] = []  # logged rows whose losses are on the device
     for batch in run.loader:
+        wait = time.perf_counter() - tic  # the host idle for the loader since the last step was queued
         if run.startup is not None:
             run.startup.lap(
                 f"first batch {len(batch['roi_img'])} images ({run.cfg.data.workers} loader processes)"
@@ -614,7 +631,8 @@ def _train_epoch(run: _Run, epoch: int, log: RunLog | None) -> None:
             values[:-1] /= run.world
         if log is not None:
             toc = time.perf_counter()
-            pending.append(({"step": run.step, "epoch": epoch, "lr": lr, "step_s": toc - tic}, values))
+            row = {"step": run.step, "epoch": epoch, "lr": lr, "step_s": toc - tic, "wait_s": wait}
+            pending.append((row, values))
             tic = toc
             if run.step % run.cfg.optim.log_every == 0:
                 _write_rows(log, pending)
