@@ -45,12 +45,7 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--out", type=Path, required=True, help="Detector run folder.")
     p.add_argument("--config", default="cpu", help="cpu | paper | a YAML/TOML file  [default: cpu]")
     p.add_argument("--max-steps", type=int, default=None, help="Stop training after N steps.")
-    p.add_argument(
-        "--minutes",
-        type=float,
-        default=None,
-        help="A new run's wall-time budget (its schedule fitted to it).",
-    )
+    p.add_argument("--minutes", type=float, default=None, help="Wall-time budget of a new run (minutes).")
     p.add_argument("--groups-n", type=int, default=50, help="Samples per factor group.")
     p.add_argument("--groups-seed", type=int, default=0)
     p.add_argument("--pose-ckpt", type=Path, default=None, help="Pose checkpoint to evaluate on both boxes.")

@@ -11,6 +11,9 @@ from torch import nn
 from posenet.training.ranger import BETAS, Ranger
 
 LR, WD, EPS = 1e-3, 0.05, 1e-8  # the smoke config's lr, the default decay and Adam epsilon
+# what posenet.training.train.make_optimizer built up to 3a10b4b: timm's Lookahead(RAdam)
+TIMM_RANGER = {"opt": "lookahead_radam", "lr": LR, "weight_decay": WD, "betas": BETAS, "eps": EPS,
+               "decoupled_weight_decay": True, "filter_bias_and_bn": True}  # fmt: skip
 STEPS = 100
 # Both run the same arithmetic in another order: RAdam's update of one weight takes at most 10 float32
 # roundings in either (sqrt, +eps, two divisions, three products, the add; the Lookahead pull 2 more),
@@ -40,16 +43,7 @@ def small_net() -> nn.Module:
 
 def timm_ranger(model: nn.Module) -> torch.optim.Optimizer:
     """What posenet.training.train.make_optimizer built up to 3a10b4b."""
-    return create_optimizer_v2(
-        model,
-        opt="lookahead_radam",
-        lr=LR,
-        weight_decay=WD,
-        betas=BETAS,
-        eps=EPS,
-        decoupled_weight_decay=True,
-        filter_bias_and_bn=True,
-    )
+    return create_optimizer_v2(model, **TIMM_RANGER)
 
 
 def train(model: nn.Module, optimizer: torch.optim.Optimizer, steps: int, seed: int = 1) -> None:
