@@ -154,6 +154,14 @@ def train(
     show_default=True,
     help="Pose solver: the network's Patch-PnP, OpenCV's PnP-RANSAC on its predicted xyz and mask, or both.",
 )
+@click.option(
+    "--passes",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Pose network runs per image: 1 on the boxes, then each re-cropped around the model's box at the "
+    "poses before (as predict --passes); the box IoU with the true box is given per pass.",
+)
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json, --predictions or --bop-csv.")
 def eval_cmd(
     data: Path,
@@ -168,6 +176,7 @@ def eval_cmd(
     obj_id: int | None,
     bop_csv: Path | None,
     pnp: str,
+    passes: int,
     overwrite: bool,
 ) -> None:
     """Rotation/translation error, ADD@0.02 m, ADD@0.1d (and what the rotation and the translation each
@@ -204,11 +213,13 @@ def eval_cmd(
         if json_path is not None:
             write_output(json_path, json.dumps(res, indent=2) + "\n")
         return
-    results = evaluate_pnp(
-        data, ckpt[0], methods, split, boxes, workers=workers, batch_size=batch_size, obj_id=obj_id
-    )
+    results = evaluate_pnp(data, ckpt[0], methods, split, boxes, workers=workers, batch_size=batch_size,
+                           obj_id=obj_id, passes=passes)  # fmt: skip
     variant, summaries = results[methods[0]].variant, [r.summary for r in results.values()]
     click.echo(f"boxes: {summaries[0]['boxes']}")
+    click.echo(
+        "crop box IoU with bbox_obj, per pass: " + ", ".join(f"{v:.3f}" for v in summaries[0]["box_iou"])
+    )
     columns = ["value"] if methods == ("patch",) else [PNP_LABELS[m] for m in methods]
     rows = summary_rows(summaries, keys=set().union(*summaries))
     click.echo(format_table([f"{variant} on {split}", *columns], rows))
@@ -245,10 +256,10 @@ def train_detector_cmd(
     resume: bool,
     obj_id: int | None,
 ) -> None:
-    """Train the single-class target detector on what is seen of the target: FCOS on the visible boxes
-    (bbox_visib; the cpu and paper presets), or `arch: mask-timm` on the visible masks (mask_visib; the
-    box is the mask's extent). Backbones start from ImageNet (`pretrained:` imagenet, package, a local
-    file or null)."""
+    """Train the single-class target detector on the box the pose network is cropped around: FCOS on the
+    whole object's box clipped to the image (bbox_obj, amodal; the cpu and paper presets), or `arch:
+    mask-timm` on the object's mask (`mask`; the box is its extent). Backbones start from ImageNet
+    (`pretrained:` imagenet, package, a local file or null)."""
     if config is None:
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "cpu"
@@ -283,19 +294,24 @@ def boxes(
     overwrite: bool,
 ) -> None:
     """Write one box per image of a split: the detector's (misses recorded), else the GT full-object boxes,
-    optionally perturbed."""
+    optionally perturbed. Every kind is the box the pose network is cropped around, bbox_obj (the whole
+    object's box): exact (it may reach past the image), perturbed or detected (clipped to the image)."""
     check_output(out, folder=False, overwrite=overwrite)
     if detector is not None and noise > 0:
         raise PosenetError("--noise perturbs the ground-truth boxes: it takes no --detector")
     if detector is None:
         insts = [i for i in scan_split(data, split, obj_id) if i.px_count_visib > 0]
         entries = boxes_from_gt(insts, noise, seed)
-        label = f"perturbed ground-truth (--noise {noise:g}, seed {seed})" if noise > 0 else "ground-truth"
+        label = (
+            f"perturbed ground-truth bbox_obj (--noise {noise:g}, seed {seed}; clipped to the image)"
+            if noise > 0
+            else "ground-truth bbox_obj (the whole object's box; it may reach past the image)"
+        )
     else:
         device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
         _, dets, _ = detect_split(detector, data, split, obj_id, device)
         entries = detection_entries(dets, obj_id, f"detector:{detector}")
-        label = f"detector ({sum(d.box is None for d in dets)} misses)"
+        label = f"detector ({sum(d.box is None for d in dets)} misses; bbox_obj clipped to the image)"
     write_output(out, json.dumps(entries) + "\n")
     click.echo(f"{len(entries)} {label} boxes -> {out}")
 
@@ -485,6 +501,20 @@ def viz(
     show_default=True,
     help="The detector's score floor: a best box scoring less is no detection (flag no_detection).",
 )
+@click.option(
+    "--passes",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Pose network runs per image: 1 on the box, then each re-cropped around the model's box at the "
+    "pose before (posenet.predict.recrop).",
+)
+@click.option(
+    "--track",
+    is_flag=True,
+    help="Seed each frame's crop from the last pose; the detector runs to start and when the target is lost "
+    "(needs --detector; a sequence dataset's frames go in time order).",
+)
 @click.option("--overwrite", is_flag=True, help="Write into an existing, non-empty --out.")
 def predict(
     source: str | None,
@@ -501,6 +531,8 @@ def predict(
     device: str,
     onnx_path: Path | None,
     min_score: float,
+    passes: int,
+    track: bool,
     overwrite: bool,
 ) -> None:
     """Poses from images a user brings: SOURCE is an image, a folder, a glob or a video (or --data DIR
@@ -509,15 +541,18 @@ def predict(
     ground-truth boxes, as posenet eval), cropped, and its pose decoded in the user's camera."""
     check_output(out, folder=True, overwrite=overwrite)
     inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
-                            preset_intrinsics, onnx_path, min_score)  # fmt: skip
+                            preset_intrinsics, onnx_path, min_score, passes, track)  # fmt: skip
     make_output_folder(out)
     with tqdm(total=inputs.total, desc="predict", unit="img", dynamic_ncols=True) as bar:
         run = run_predict(inputs.predictor, inputs.frames, inputs.total, out, inputs.camera, inputs.box_for,
                           vis=not no_vis, formats=formats, video_fps=inputs.video_fps, progress=bar.update,
-                          warn=tqdm.write)  # fmt: skip
+                          warn=tqdm.write, tracker=inputs.tracker,
+                          sequence_of=inputs.sequence_of)  # fmt: skip
     posed = sum(r.get("R") is not None for r in run.records)
     click.echo(f"{len(run.records)} inputs, {posed} poses, {run.failed} failed, "
                f"{len(run.records) / max(run.seconds, 1e-9):.1f} images/s")  # fmt: skip
+    if inputs.tracker is not None:
+        click.echo(f"tracking: the detector ran on {inputs.tracker.detections} of {len(run.records)} inputs")
     stages = inputs.predictor.timings.mean_ms()
     click.echo("latency per image (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
     for path in run.files:

@@ -24,6 +24,7 @@ from posenet.detection.detector import (
     hflip,
     image_groups,
     paste_target,
+    target_boxes,
     visible_boxes,
 )
 from posenet.detection.segmenter import JOIN_SHARE, mask_box
@@ -60,12 +61,12 @@ def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Pa
     return tiny_pose_checkpoint(dataset_dir, tmp_path_factory, "pose")
 
 
-def test_detector_learns_visible_boxes(dataset_dir: Path, detector_run: Path) -> None:
-    """Mean IoU with bbox_visib on the training images: trained well above an untrained network and
-    above the best fixed box (the mean training box)."""
+def test_detector_learns_its_boxes(dataset_dir: Path, detector_run: Path) -> None:
+    """Mean IoU with the box it learns (target_boxes: bbox_obj clipped to the image) on the training
+    images: trained well above an untrained network and above the best fixed box (the mean training box)."""
     cpu = torch.device("cpu")
     images = image_groups(dataset_dir, "train", 1)
-    gt = [visible_boxes(i) for i in images]
+    gt = [target_boxes(i) for i in images]
     model, state = load_detector(detector_run / "last.pt", cpu)
     trained = box_metrics(detect(model, detector_dataset(state, images), cpu), gt)
     torch.manual_seed(0)
@@ -159,18 +160,18 @@ def test_by_factor_with_a_box_file_gives_the_gap_to_gt_boxes(
 
 
 def test_copy_paste_and_mirror_move_the_target_with_its_box(dataset_dir: Path) -> None:
-    """At scale 1 the pasted pixels are the donor's visible target, inside the appended box and clear of
-    the image's own; mirroring maps a box onto the mirrored pixels."""
+    """At scale 1 the pasted pixels are the donor's target (its whole-object mask), inside the appended box
+    (the donor's target_boxes) and clear of the image's own; mirroring maps a box onto the mirrored pixels."""
     donor = next(i for i in image_groups(dataset_dir, "train", 1) if i[0].px_count_visib > 50)
     donor_img = cv2.cvtColor(cv2.imread(str(donor[0].rgb)), cv2.COLOR_BGR2RGB).astype(np.float32) / 255
     own = np.float32([[0, 0, 20, 20]])
     canvas = np.zeros_like(donor_img)
     out, boxes = paste_target(canvas, own, donor, np.random.default_rng(0), (1.0, 1.0))
     assert len(boxes) == 2 and np.array_equal(boxes[0], own[0])
-    x0, y0, x1, y1 = (int(v) for v in visible_boxes(donor[:1])[0])
+    x0, y0, x1, y1 = (int(v) for v in target_boxes(donor[:1])[0])
     px, py, qx, qy = (int(v) for v in boxes[1])
     assert (qx - px, qy - py) == (x1 - x0, y1 - y0) and (px >= 20 or py >= 20)
-    mask = cv2.imread(str(donor[0].mask_visib), cv2.IMREAD_GRAYSCALE)[y0:y1, x0:x1] > 0
+    mask = cv2.imread(str(donor[0].mask), cv2.IMREAD_GRAYSCALE)[y0:y1, x0:x1] > 0
     assert np.array_equal(out[py:qy, px:qx][mask], donor_img[y0:y1, x0:x1][mask])
     assert not out[:py].any() and not out[qy:].any() and not out[:, :px].any() and not out[:, qx:].any()
     flipped, fboxes = hflip(out, boxes)

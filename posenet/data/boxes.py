@@ -5,6 +5,11 @@ The file is BOP's detection format (docs/posenet.md): a JSON list of
 has several entries for the object, the highest score wins. posenet adds two things BOP readers ignore or
 skip: a "source" field per entry (`gt`, `gt+noise`, `detector`) and misses, entries with "bbox": [] and
 "score": 0, for images where the detector found nothing; evaluation counts those as failures.
+
+Every source holds one kind of box, the one the pose network trains on: `bbox_obj`, the box of the
+object's whole silhouette (occluded parts included). `gt` is bbox_obj itself (it may reach past the image);
+`gt+noise` and `detector` are it perturbed or detected, clipped to the image (the amodal box GDRNPP's
+detectors learn; the detector learns bbox_obj clipped, posenet.detection.detector.target_boxes).
 """
 
 from __future__ import annotations
@@ -51,6 +56,16 @@ def boxes_from_gt(instances: list[Instance], noise: float = 0.0, seed: int = 0) 
             }
         )
     return out
+
+
+def clip_box(box: Box, size: tuple[int, int]) -> Box | None:
+    """The part of `box` inside an image of `size` (width, height), or None when none is: the amodal box
+    a detector can see (GDRNPP's convention), since no pixel past the border is in the image."""
+    x0, y0 = max(box[0], 0.0), max(box[1], 0.0)
+    x1, y1 = min(box[0] + box[2], float(size[0])), min(box[1] + box[3], float(size[1]))
+    if x1 <= x0 or y1 <= y0:
+        return None
+    return x0, y0, x1 - x0, y1 - y0
 
 
 def miss_entry(scene_id: int, image_id: int, obj_id: int, time_s: float, source: str) -> dict:

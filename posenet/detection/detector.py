@@ -1,12 +1,15 @@
 """The target detector of the paper's protocol: its configuration, its networks and its data.
 
-One class (the target object) is learned from what is seen of it (`bbox_visib`, `mask_visib`), since
-the pose network's crop should cover what is seen. The backbone starts from ImageNet weights, loaded as
-the pose network's are (`pretrained`, posenet.models.backbone). Three networks: `fcos-timm-fpn` (the
-`cpu` preset) FCOS over the package-shipped EfficientNet-Lite0 with an FPN over strides 8-32 (the
-benchmark's targets are mostly 10-64 px); `fcos-resnet50-fpn` (the `paper` preset) torchvision's
-FCOS-ResNet50-FPN on timm's ImageNet ResNet-50; `mask-timm` the visible mask over a timm backbone, its
-box the mask's extent (posenet.detection.segmenter). `pretrained: null` trains from random init.
+One class (the target object) is learned as the pose network is cropped: around the whole object's
+box (`bbox_obj`, occluded parts included) clipped to the image, the amodal box of GDRNPP's detectors
+(`target_boxes`); the mask network learns the whole object's in-image mask (`mask`), whose extent is
+that box. `bbox_visib` stays a box a detector is also scored against (`visible_boxes`). The backbone
+starts from ImageNet weights, loaded as the pose network's are (`pretrained`, posenet.models.backbone).
+Three networks: `fcos-timm-fpn` (the `cpu` preset) FCOS over the package-shipped EfficientNet-Lite0 with
+an FPN over strides 8-32 (the benchmark's targets are mostly 10-64 px); `fcos-resnet50-fpn` (the `paper`
+preset) torchvision's FCOS-ResNet50-FPN on timm's ImageNet ResNet-50; `mask-timm` the object's mask over
+a timm backbone, its box the mask's extent (posenet.detection.segmenter). `pretrained: null` trains from
+random init.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from torchvision.ops import FeaturePyramidNetwork
 
 from posenet.config import OptimConfig, override_fields, plain, read_config_file
 from posenet.data.augment import brightness_contrast
+from posenet.data.boxes import clip_box
 from posenet.data.io import read_bgr, read_mask
 from posenet.data.layout import Instance, scan_split
 from posenet.detection.segmenter import MaskDetector
@@ -38,7 +42,7 @@ from posenet.models.backbone import IMAGENET, PACKAGE, initial_weights, input_me
 PRESETS = ("cpu", "paper")
 ALIASES = {"smoke": "cpu"}
 ARCHS = ("mask-timm", "fcos-timm-fpn", "fcos-resnet50-fpn")
-MASK_ARCHS = ("mask-timm",)  # the networks that learn mask_visib (their targets carry masks)
+MASK_ARCHS = ("mask-timm",)  # the networks that learn the object's mask (their targets carry masks)
 # a resampled 0 / 1 mask is the target's where it reaches this: bilinear resampling spreads a lone or
 # diagonal pixel to >= 1/4 about its place but not always to 1/2
 MASK_CUT = 0.25
@@ -204,6 +208,14 @@ def image_groups(root: Path, split: str, obj_id: int) -> list[list[Instance]]:
     return list(groups.values())
 
 
+def target_boxes(instances: list[Instance]) -> np.ndarray:
+    """(n, 4) float32 [x0, y0, x1, y1] pixel-edge boxes the detector learns: of the instances with a visible
+    pixel, the whole object's box (bbox_obj) clipped to the image (posenet.data.boxes.clip_box)."""
+    clipped = [clip_box(i.bbox_obj, i.image_size) for i in instances if i.px_count_visib > 0]
+    boxes = [(x, y, x + w, y + h) for box in clipped if box is not None for x, y, w, h in [box]]
+    return np.array(boxes, np.float32).reshape(-1, 4)
+
+
 def visible_boxes(instances: list[Instance]) -> np.ndarray:
     """(n, 4) float32 [x0, y0, x1, y1] pixel-edge boxes of the instances with a visible pixel (bbox_visib)."""
     boxes = [(x, y, x + w, y + h) for i in instances if i.px_count_visib > 0 for x, y, w, h in [i.bbox_visib]]
@@ -246,15 +258,18 @@ def paste_target(
     scale: tuple[float, float],
     tries: int = 10,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Copy-paste: the visible pixels (mask_visib) of the donor's first visible instance, scaled by
-    s ~ U(scale), pasted at a random place clear of `boxes`; its box appended (and, when `img` carries a
-    mask as a 4th channel, its mask). Unchanged when the donor shows nothing or no clear place is found
-    in `tries`."""
+    """Copy-paste: the pixels of the donor's first visible instance's whole-object mask (`mask`: what
+    hides the target moves with it), scaled by s ~ U(scale), pasted at a random place clear of `boxes`;
+    its box appended (and, when `img` carries a mask as a 4th channel, its mask). Unchanged when the donor
+    shows nothing or no clear place is found in `tries`."""
     shown = [i for i in donor if i.px_count_visib > 0]
     if not shown:
         return img, boxes
-    x0, y0, x1, y1 = (int(v) for v in visible_boxes(shown[:1])[0])
-    mask = read_mask(shown[0].mask_visib)[y0:y1, x0:x1] > 0
+    found = target_boxes(shown[:1])
+    if not len(found):
+        return img, boxes
+    x0, y0, x1, y1 = (int(v) for v in found[0])
+    mask = read_mask(shown[0].mask)[y0:y1, x0:x1] > 0
     patch, s = _read_rgb(shown[0].rgb)[y0:y1, x0:x1], rng.uniform(*scale)
     if img.shape[2] == 4:
         patch = np.dstack([patch, mask.astype(np.float32)])  # its blend is replaced below
@@ -292,8 +307,8 @@ def hflip(img: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class DetectionDataset(Dataset):
-    """One item per image: (3, H, W) float RGB in [0, 1] and its target {boxes, labels} (bbox_visib), plus
-    `masks` ((1, H, W) float 0/1, the union of the instances' mask_visib) for a mask network.
+    """One item per image: (3, H, W) float RGB in [0, 1] and its target {boxes, labels} (target_boxes), plus
+    `masks` ((1, H, W) float 0/1, the union of the instances' whole-object masks) for a mask network.
 
     With `train`, each image is augmented (copy-paste, zoom, mirror, brightness/contrast) from a generator
     seeded by (seed, epoch, index): the same run sees the same images, whatever the loader processes. The
@@ -309,10 +324,10 @@ class DetectionDataset(Dataset):
     def __getitem__(self, index: int) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         insts = self.images[index]
         img = _read_rgb(insts[0].rgb)
-        boxes = visible_boxes(insts)
+        boxes = target_boxes(insts)
         with_mask = self.cfg.arch in MASK_ARCHS
         if with_mask:
-            shown = [read_mask(i.mask_visib) > 0 for i in insts if i.px_count_visib > 0]
+            shown = [read_mask(i.mask) > 0 for i in insts if i.px_count_visib > 0]
             union = np.logical_or.reduce(shown) if shown else np.zeros(img.shape[:2], bool)
             img = np.dstack([img, union.astype(np.float32)])
         if self.train:

@@ -1,11 +1,12 @@
-"""The mask detector: one target per image, found as its visible mask, its box the mask's extent.
+"""The mask detector: one target per image, found as its mask, its box the mask's extent.
 
-scgen's images hold one target, and the pose network's crop should cover what is seen of it, i.e.
-`bbox_visib`, the extent of `mask_visib`. A box regressor (FCOS) has to learn four edge distances from
-features strides away; a per-pixel mask puts every edge where the pixels say. The network is a timm
-backbone (the package-shipped ImageNet EfficientNet-Lite0 by default) with an FPN-style top-down decoder
-down to stride 2 and one logit per pixel, upsampled to the input size; it learns `mask_visib` (binary
-cross-entropy plus a soft Dice term, which keeps a 10-pixel target from drowning in a 320x240 image).
+scgen's images hold one target, and the pose network is cropped around the whole object's box
+(`bbox_obj`), whose part in the image is the extent of the object's mask (`mask`, occluded pixels
+included; posenet.detection.detector.target_boxes). A box regressor (FCOS) has to learn four edge
+distances from features strides away; a per-pixel mask puts every edge where the pixels say. The
+network is a timm backbone (the package-shipped ImageNet EfficientNet-Lite0 by default) with an FPN-style
+top-down decoder down to stride 2 and one logit per pixel, upsampled to the input size; it learns `mask`
+(binary cross-entropy plus a soft Dice term, which keeps a 10-pixel target from drowning in a 320x240 image).
 
 The box (`mask_box`) is the extent of the confident pixels of the strongest blob: the probability map is
 thresholded, blobs closer than `JOIN_SHARE` of the image diagonal are joined (an occluder that cuts the

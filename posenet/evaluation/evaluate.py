@@ -25,7 +25,9 @@ from tqdm import tqdm
 from posenet.checkpoint import load_model
 from posenet.config import config_from_dict
 from posenet.data import open_split
-from posenet.data.boxes import box_source, read_misses
+from posenet.data.boxes import Box, box_source, read_misses
+from posenet.data.camera import make_camera
+from posenet.data.dataset import PoseDataset
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.evaluation.metrics import TURNED_DEG, headline_add, sample_errors, summarise
@@ -33,6 +35,7 @@ from posenet.export.bench import dummy_inputs, measure_latency_ms
 from posenet.geometry import decode_pose
 from posenet.models import PoseNet
 from posenet.predict.ransac import PNP_LABELS, ransac_poses
+from posenet.predict.recrop import box_iou, projected_box
 
 BATCH_SIZE = 32
 LATENCY_WARMUP = 5  # untimed batch-1 forwards (allocator, cuDNN autotuning)
@@ -185,6 +188,7 @@ def evaluate(
     batch_size: int = BATCH_SIZE,
     obj_id: int | None = None,
     pnp: str = "patch",
+    passes: int = 1,
 ) -> EvalResult:
     """Run the checkpoint over the split's instances of object `obj_id` (default: the object it was
     trained on) on the current device (GPU if any), `batch_size` RoIs at a time, solving each pose with
@@ -192,10 +196,10 @@ def evaluate(
 
     The batch size changes neither the records (beyond float rounding and their time_s) nor the summary;
     `latency_ms` is the batch-1 network forward, timed by `posenet.export.bench.measure_latency_ms` on the
-    same
-    device.
+    same device. With `passes` > 1 each pass after the first re-crops around the model's box at the poses
+    before (posenet.predict.recrop), as `posenet predict --passes` does.
     """
-    return evaluate_pnp(data, ckpt, (pnp,), split, boxes, image_ids, workers, batch_size, obj_id)[pnp]
+    return evaluate_pnp(data, ckpt, (pnp,), split, boxes, image_ids, workers, batch_size, obj_id, passes)[pnp]
 
 
 def evaluate_pnp(
@@ -208,8 +212,11 @@ def evaluate_pnp(
     workers: int = 2,
     batch_size: int = BATCH_SIZE,
     obj_id: int | None = None,
+    passes: int = 1,
 ) -> dict[str, EvalResult]:
-    """`evaluate` with each PnP method of `methods` on the same network outputs (one forward pass)."""
+    """`evaluate` with each PnP method of `methods` on the same network outputs (one forward pass per
+    pass; the re-crops follow the first method's poses). The summary's `box_iou` is the mean IoU of the
+    crop boxes with the true ones (bbox_obj) at each pass, over the images with a box."""
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     model, state = load_model(ckpt, device)
     train_cfg = config_from_dict(state["config"])
@@ -220,12 +227,18 @@ def evaluate_pnp(
         data, split, data_cfg, model.config, train=False, boxes_file=boxes, image_ids=image_ids
     )
     loader = DataLoader(dataset, batch_size=batch_size, shuffle=False, num_workers=workers)
+    misses = read_misses(boxes, data_cfg.obj_id) if boxes is not None else set()
     predicted = predict(model, loader, dataset.obj, device, methods, train_cfg.loss.mask_type)
+    ious = [crop_iou(dataset, misses)]
+    for _ in range(passes - 1):
+        dataset.boxes = recrop_boxes(dataset, predicted[methods[0]][0], misses)
+        predicted = predict(model, loader, dataset.obj, device, methods, train_cfg.loss.mask_type)
+        ious.append(crop_iou(dataset, misses))
     latency = measure_latency_ms(model, dummy_inputs(model.config, device), LATENCY_WARMUP, LATENCY_ITERS)
     results = {}
     for method, (records, errors) in predicted.items():
         if boxes is not None:
-            records, errors = fail_misses(records, list(errors), read_misses(boxes, data_cfg.obj_id))
+            records, errors = fail_misses(records, list(errors), misses)
         summary = summarise(errors, dataset.obj.diameter, dataset.obj.symmetric)
         summary |= {
             "latency_ms": latency,
@@ -234,10 +247,40 @@ def evaluate_pnp(
             "boxes": box_description(boxes),
             "pnp": PNP_LABELS[method],
             "pnp_failed": sum(r.get("pnp_failed", False) and not r.get("missed") for r in records),
+            "passes": passes,
+            "box_iou": ious,
         }
         variant = state["model_config"]["variant"]
         results[method] = EvalResult(variant, summary, records, errors, dataset.obj.diameter)
     return results
+
+
+def crop_boxes(dataset: PoseDataset) -> list[Box]:
+    """The box each instance of `dataset` is cropped around, in its order (its box file's, else GT)."""
+    return [dataset.boxes[i.key] if dataset.boxes is not None else i.bbox_obj for i in dataset.instances]
+
+
+def crop_iou(dataset: PoseDataset, misses: set[tuple[int, int]]) -> float:
+    """Mean IoU of the crop boxes with the true ones (bbox_obj) over the instances of images not missed."""
+    pairs = zip(dataset.instances, crop_boxes(dataset), strict=True)
+    values = [box_iou(box, inst.bbox_obj) for inst, box in pairs if inst.key not in misses]
+    return float(np.mean(values)) if values else math.nan
+
+
+def recrop_boxes(
+    dataset: PoseDataset, records: list[dict[str, Any]], misses: set[tuple[int, int]]
+) -> dict[tuple[int, int], Box]:
+    """Each image's next crop box: the model's box at its pose in `records` (`predict`'s, in the dataset's
+    order); a missed image, one without a pose, or one whose pose projects nowhere keeps its box."""
+    out = {}
+    for inst, box, r in zip(dataset.instances, crop_boxes(dataset), records, strict=True):
+        again = None
+        if inst.key not in misses and r["R"] is not None:
+            camera = make_camera(inst.K, inst.dist, inst.image_size)
+            R = np.asarray(r["R"], np.float64).reshape(3, 3)
+            again = projected_box(dataset.obj.vertices, R, np.asarray(r["t"], np.float64), camera)
+        out[inst.key] = again if again is not None else box
+    return out
 
 
 def read_groups(path: Path) -> tuple[str | None, dict[str, dict[str, list[int]]]]:

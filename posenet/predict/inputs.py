@@ -16,6 +16,8 @@ from posenet.errors import PosenetError
 from posenet.predict.predictor import Box, Predictor
 from posenet.predict.run import MISS
 from posenet.predict.sources import Frame, dataset_frames, read_frames, resolve_source
+from posenet.predict.track import Tracker
+from scgen.io import SequenceFrame, read_sequence_frames
 
 PresetLookup = Callable[[str], tuple[list[list[float]], list[float], tuple[int, int]]]
 TRAINING = "training"  # --camera training: the checkpoint's own camera
@@ -29,6 +31,12 @@ class PredictInputs:
     camera: Camera | None  # None with --data: each frame brings its own
     box_for: Callable[[Frame, int], Box | str | None]
     video_fps: float = 0.0
+    tracker: Tracker | None = None  # --track
+    sequences: dict[tuple[int, int], SequenceFrame] | None = None  # a sequence dataset's frames
+
+    def sequence_of(self, frame: Frame) -> SequenceFrame | None:
+        """A dataset frame's sequence, frame number and time; None outside a sequence dataset."""
+        return (self.sequences or {}).get(frame.key) if frame.key is not None else None
 
 
 def resolve_camera(text: str, training: Camera, presets: PresetLookup) -> Camera:
@@ -69,8 +77,11 @@ def predict_inputs(
     presets: PresetLookup,
     onnx: Path | None = None,
     min_score: float | None = None,
+    passes: int = 1,
+    track: bool = False,
 ) -> PredictInputs:
-    """The checked inputs of one predict run (nothing is written here)."""
+    """The checked inputs of one predict run (nothing is written here). With `track`, a sequence
+    dataset's frames come in time order, sequence by sequence."""
     if (source is None) == (data is None):
         raise PosenetError("give SOURCE (an image, folder, glob or video) or --data DIR, not both or neither")
     if box is not None and boxes is not None:
@@ -78,13 +89,20 @@ def predict_inputs(
     if data is None and camera is None:
         raise PosenetError("--camera is required with SOURCE: fx,fy,cx,cy[,dist], a camera.json, a scgen "
                            "preset name, or 'training' (the checkpoint's own camera)")  # fmt: skip
+    if track and (detector is None or box is not None or boxes is not None):
+        raise PosenetError("--track seeds each frame from the last pose and finds the target with the "
+                           "detector: give --detector, and neither --box nor --boxes")  # fmt: skip
     fixed_box = parse_box(box) if box is not None else None
-    predictor = Predictor.load(ckpt, detector, device, data, onnx, min_score)
+    predictor = Predictor.load(ckpt, detector, device, data, onnx, min_score, passes)
+    sequences = read_sequence_frames(data) if data is not None else {}
     obj_id = predictor.obj.obj_id
     if data is not None:
         if camera is not None:
             raise PosenetError("--camera is taken from the dataset with --data; leave it out")
         frames = dataset_frames(data, split, obj_id)
+        if track and sequences:
+            order = {k: (s.sequence_id, s.frame) for k, s in sequences.items()}
+            frames.sort(key=lambda f: order.get(f.key, (-1, 0)) if f.key is not None else (-1, 0))
         user, total, fps, stream = None, len(frames), 0.0, frames
         keys = [f.key for f in frames if f.key is not None]
     else:
@@ -106,7 +124,8 @@ def predict_inputs(
             return frame.box
         return None
 
-    return PredictInputs(predictor, stream, total, user, box_for, fps)
+    tracker = Tracker(predictor) if track else None
+    return PredictInputs(predictor, stream, total, user, box_for, fps, tracker, sequences)
 
 
 def _read_box_file(path: Path, obj_id: int, keys: list[tuple[int, int]]) -> tuple[dict, set]:

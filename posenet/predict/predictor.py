@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from scipy.spatial.transform import Rotation
 
 from posenet.checkpoint import load_checkpoint, model_from_state
 from posenet.config import config_from_dict
@@ -39,6 +38,7 @@ from posenet.errors import PosenetError
 from posenet.geometry import decode_pose, mask_probability
 from posenet.predict.pixels import to_bgr8
 from posenet.predict.ransac import MIN_POINTS, correspondences
+from posenet.predict.recrop import projected_box
 
 Box = tuple[float, float, float, float]  # [x, y, w, h]: pixels x .. x + w - 1 (posenet.data.crop)
 LOW_CONFIDENCE = 0.5  # below: the pose is flagged low_confidence
@@ -60,12 +60,15 @@ class Pose:
     score: float
     confidence: float
     flags: tuple[str, ...] = ()
+    crops: tuple[Box, ...] = ()  # each pass's crop box in the user's image: `box`, then the re-crops
 
     @property
     def quaternion(self) -> list[float] | None:
         """R as a scalar-first unit quaternion (w, x, y, z), SPEED+'s q_vbs2tango convention."""
         if self.R is None:
             return None
+        from scipy.spatial.transform import Rotation  # here: predict runs on a node without scipy
+
         x, y, z, w = Rotation.from_matrix(self.R).as_quat()
         q = np.array([w, x, y, z])
         return (q if w >= 0 else -q).tolist()
@@ -79,6 +82,7 @@ class Pose:
             "score": round(float(self.score), 4),
             "confidence": round(float(self.confidence), 4),
             "flags": list(self.flags),
+            "crops": [[round(float(v), 2) for v in b] for b in self.crops[1:]],
         }
 
 
@@ -126,10 +130,12 @@ class Predictor:
         detector: Detector | None = None,
         device: torch.device | None = None,
         min_score: float = 0.0,
+        passes: int = 1,
     ) -> None:
         cfg = config_from_dict(state["config"])
         self.network, self.obj, self.camera, self.detector = network, obj, camera, detector
         self.min_score = min_score  # a detection scoring less is none (no_detection)
+        self.passes = passes  # network runs per image: 1 on the given box, then re-crops (predict.recrop)
         self.device = device or torch.device("cpu")
         self.pad_scale, self.mask_type = cfg.data.pad_scale, cfg.loss.mask_type
         model_cfg = state["model_config"]
@@ -146,13 +152,15 @@ class Predictor:
         data: Path | None = None,
         onnx: Path | None = None,
         min_score: float | None = None,
+        passes: int = 1,
     ) -> Predictor:
         """The pose checkpoint `ckpt` and a detector (its checkpoint, or its ONNX graph from `posenet
         export`: a `.onnx` file runs in onnxruntime) on `device`; `onnx`, the pose network's exported
         graph, runs in onnxruntime instead of torch (the checkpoint still gives the object and camera). A
         checkpoint written before predict existed has no object or camera: `data`, the dataset it was
         trained on, supplies them. A detection scoring under `min_score` (None: the detector's floor,
-        posenet.detection.detect.MIN_SCORE) is no detection."""
+        posenet.detection.detect.MIN_SCORE) is no detection. `passes`: the network's runs per image, each
+        after the first re-cropped around the model's box at the pose before (posenet.predict.recrop)."""
         from posenet.detection.detect import MIN_SCORE  # torchvision's FCOS: only when asked for
 
         dev = torch.device(device)
@@ -163,7 +171,8 @@ class Predictor:
         else:
             network = model_from_state(state, ckpt, dev)  # the checkpoint is read once
         floor = MIN_SCORE if min_score is None else min_score
-        return cls(network, state, obj, camera, load_box_detector(detector, camera, dev), dev, floor)
+        detect = load_box_detector(detector, camera, dev)
+        return cls(network, state, obj, camera, detect, dev, floor, passes)
 
     def detect(self, image: np.ndarray) -> tuple[Box, float] | None:
         """The detector's best box [x, y, w, h] and score in an image of the training camera, or None."""
@@ -198,6 +207,21 @@ class Predictor:
             box = map_box(train_box, self.camera, user)
         else:
             train_box, score = map_box(box, user, self.camera), 1.0
+        R, t, confidence = self._estimate(seen, train_box)
+        crops = [train_box]
+        for _ in range(self.passes - 1):  # re-crop around the box of the model at the pose just decoded
+            again = projected_box(self.obj.vertices, R, t, self.camera)
+            if again is None:
+                break
+            R, t, confidence = self._estimate(seen, again)
+            crops.append(again)
+        flags = pose_flags(R, t, self.obj, user, confidence)
+        user_crops = [tuple(float(v) for v in box), *(map_box(b, self.camera, user) for b in crops[1:])]
+        return Pose(R, t, user_crops[0], score, confidence, flags, tuple(user_crops))
+
+    def _estimate(self, seen: np.ndarray, train_box: Box) -> tuple[np.ndarray, np.ndarray, float]:
+        """One pass: the pose (R, t) and its confidence from the crop around `train_box` of `seen`, an
+        image of the training camera."""
         with _Clock(self.timings, "crop"):
             roi = roi_from_box(train_box, self.camera.size, self.pad_scale)
             batch = {"roi_img": image_tensor(roi_image(seen, roi, self.input_res))}
@@ -207,9 +231,7 @@ class Predictor:
             out = self.network(batch["roi_img"], batch["roi_coord2d"])
         with _Clock(self.timings, "solve"):
             R, t = (x[0].double().cpu().numpy() for x in decode_pose(out, batch))
-            confidence = self._confidence(out, roi, R, t)
-            flags = pose_flags(R, t, self.obj, user, confidence)
-        return Pose(R, t, tuple(float(v) for v in box), score, confidence, flags)
+            return R, t, self._confidence(out, roi, R, t)
 
     def _confidence(self, out: dict[str, torch.Tensor], roi: Any, R: np.ndarray, t: np.ndarray) -> float:
         """Self-consistency of the network's two answers: the share of pixels of its visible mask whose

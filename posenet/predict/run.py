@@ -27,7 +27,8 @@ from posenet.data.camera import Camera, CameraMismatch
 from posenet.predict.overlay import contact_sheet, draw_pose
 from posenet.predict.predictor import NO_DETECTION, Box, Predictor
 from posenet.predict.sources import Frame, load_frame
-from scgen.io import atomic_write_bytes, atomic_write_text, bop
+from posenet.predict.track import Tracker
+from scgen.io import SequenceFrame, atomic_write_bytes, atomic_write_text, bop
 
 FORMATS = ("bop", "speedplus")
 MISS = "miss"  # a box file's entry for an image where its detector found nothing
@@ -64,9 +65,14 @@ def run_predict(
     video_fps: float = 0.0,
     progress: Callable[[int], None] | None = None,
     warn: Callable[[str], None] = print,
+    tracker: Tracker | None = None,
+    sequence_of: Callable[[Frame], SequenceFrame | None] = lambda frame: None,
 ) -> PredictRun:
     """Predict every frame (a dataset frame brings its camera, else `camera`), writing into `out` (made
-    by the caller). `box_for(frame, index)` gives a frame's box, None for the detector's, MISS for none."""
+    by the caller). `box_for(frame, index)` gives a frame's box, None for the detector's, MISS for none.
+    With a `tracker`, a frame without a given box is seeded from the last pose (posenet.predict.track),
+    restarted where `sequence_of` (a frame's sequence, frame number and time; None outside a sequence
+    dataset) says a new sequence begins; each record then names its box_source."""
     run, tic = PredictRun(), time.perf_counter()
     sheet_every = max(1, total // SHEET_TILES)
     sheet: list[np.ndarray] = []
@@ -74,6 +80,7 @@ def run_predict(
     if vis and not video_fps:
         (out / "overlays").mkdir(exist_ok=True)
     stream, noted = iter(frames), set()
+    sequence: int | None = None  # the sequence of the frame before
     for index in itertools.count():
         before = {s: len(v) for s, v in predictor.timings.ms.items()}
         t0 = time.perf_counter()  # a file or video frame is decoded by the stream, a dataset's by load_frame
@@ -85,6 +92,12 @@ def run_predict(
         base: dict[str, Any] = {"source": frame.name, "index": index}
         if frame.key is not None:
             base |= {"scene_id": frame.key[0], "im_id": frame.key[1]}
+        seq = sequence_of(frame)
+        if seq is not None:
+            base |= {"sequence_id": seq.sequence_id, "frame": seq.frame, "time_s": seq.time_s}
+            if tracker is not None and seq.sequence_id != sequence:
+                tracker.reset()
+            sequence = seq.sequence_id
         cam, error = _camera_for(frame, camera)
         if error is not None:
             run.failed += 1
@@ -96,7 +109,13 @@ def run_predict(
                 noted.add(frame.note)
                 warn(f"Warning: {frame.name}: {frame.note} (so is every such input after it, unmentioned)")
             box = box_for(frame, index)
-            pose = NO_DETECTION if box == MISS else predictor(frame.image, cam, box)  # type: ignore[arg-type]
+            if box == MISS:
+                pose = NO_DETECTION
+            elif tracker is not None:
+                pose, source = tracker(frame.image, cam, box)  # type: ignore[arg-type]
+                base["box_source"] = source
+            else:
+                pose = predictor(frame.image, cam, box)  # type: ignore[arg-type]
             if vis:
                 t1 = time.perf_counter()
                 drawn = draw_pose(frame.image, pose, predictor.obj, cam)
