@@ -195,6 +195,8 @@ def eval_cmd(
         given = "--bop-csv" if bop_csv is not None else "--predictions"
         raise PosenetError(f"--by-factor writes a per-group table (--json), not {given}: run eval without "
                            f"--by-factor for the estimates")  # fmt: skip
+    if by_factor is not None and passes > 1:
+        raise PosenetError("--passes re-crops the estimates of one evaluation: run eval without --by-factor")
     if by_factor is None and len(ckpt) != 1:
         raise PosenetError("several --ckpt are only compared with --by-factor")
     for c in ckpt:  # every checkpoint, of the right kind, before any work

@@ -193,3 +193,10 @@ def test_predict_track_on_a_sequence_dataset(
     assert all(r["box_source"] == DETECTOR for r in firsts)
     ran = sum(r["box_source"] == DETECTOR for r in records)
     assert f"the detector ran on {ran} of {len(records)} inputs" in output
+
+
+def test_eval_refuses_passes_with_by_factor(tmp_path: Path):
+    """--by-factor compares checkpoints over groups at one pass; --passes there is refused, not ignored."""
+    args = ["eval", "--data", tmp_path, "--ckpt", tmp_path / "a.pt", "--by-factor", tmp_path / "g.json"]
+    res = CliRunner().invoke(main, [str(a) for a in [*args, "--passes", 2]])
+    assert res.exit_code != 0 and "--passes re-crops the estimates of one evaluation" in res.output
