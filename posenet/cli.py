@@ -35,6 +35,7 @@ from posenet.evaluation.sequences import per_sequence, sequence_table
 from posenet.evaluation.viz import heatmap_panel, overlay_panel
 from posenet.export.bench import PAPER, device_label, format_report, resolve_device, run_bench
 from posenet.models import VARIANTS
+from posenet.predict.batch import BatchPredictor
 from posenet.predict.inputs import predict_inputs
 from posenet.predict.ransac import PNP_LABELS, PNP_METHODS
 from posenet.predict.run import FORMATS as PREDICT_FORMATS
@@ -517,6 +518,18 @@ def viz(
     help="Seed each frame's crop from the last pose; the detector runs to start and when the target is lost "
     "(needs --detector; a sequence dataset's frames go in time order).",
 )
+@click.option(
+    "--batch",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Frames predicted together: loaded and warped in threads, the detector (a .pt one) and the pose "
+    "network run on the batch (posenet.predict.batch); 1: one at a time. Not with --track.",
+)
+@click.option(
+    "--cuda-graphs", is_flag=True, help="With --batch on CUDA: replay both networks as CUDA graphs."
+)
+@click.option("--bf16", is_flag=True, help="With --batch: run both networks under bf16 autocast.")
 @click.option("--overwrite", is_flag=True, help="Write into an existing, non-empty --out.")
 def predict(
     source: str | None,
@@ -535,6 +548,9 @@ def predict(
     min_score: float,
     passes: int,
     track: bool,
+    batch: int,
+    cuda_graphs: bool,
+    bf16: bool,
     overwrite: bool,
 ) -> None:
     """Poses from images a user brings: SOURCE is an image, a folder, a glob or a video (or --data DIR
@@ -542,14 +558,23 @@ def predict(
     size: docs/posenet.md), boxed by --detector (or --box / --boxes; with --data and neither, the
     ground-truth boxes, as posenet eval), cropped, and its pose decoded in the user's camera."""
     check_output(out, folder=True, overwrite=overwrite)
+    if batch > 1 and track:
+        raise PosenetError("--track seeds each frame from the one before: it takes no --batch")
+    if (cuda_graphs or bf16) and batch == 1:
+        raise PosenetError("--cuda-graphs and --bf16 go with --batch N (N > 1)")
     inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
                             preset_intrinsics, onnx_path, min_score, passes, track)  # fmt: skip
+    batched = None
+    if batch > 1:
+        batched = BatchPredictor(inputs.predictor, batch, detector, graphs=cuda_graphs, bf16=bf16)
     make_output_folder(out)
     with tqdm(total=inputs.total, desc="predict", unit="img", dynamic_ncols=True) as bar:
         run = run_predict(inputs.predictor, inputs.frames, inputs.total, out, inputs.camera, inputs.box_for,
                           vis=not no_vis, formats=formats, video_fps=inputs.video_fps, progress=bar.update,
-                          warn=tqdm.write, tracker=inputs.tracker,
-                          sequence_of=inputs.sequence_of)  # fmt: skip
+                          warn=tqdm.write, tracker=inputs.tracker, sequence_of=inputs.sequence_of,
+                          batched=batched)  # fmt: skip
+    if batched is not None:
+        batched.close()
     posed = sum(r.get("R") is not None for r in run.records)
     click.echo(f"{len(run.records)} inputs, {posed} poses, {run.failed} failed, "
                f"{len(run.records) / max(run.seconds, 1e-9):.1f} images/s")  # fmt: skip

@@ -23,7 +23,8 @@ from posenet.cli import main
 from posenet.data.camera import CameraMismatch, map_box, read_camera_file, resized, to_training_camera
 from posenet.errors import PosenetError
 from posenet.evaluation.evaluate import evaluate
-from posenet.predict import Predictor, make_camera
+from posenet.predict import Pose, Predictor, make_camera
+from posenet.predict.batch import BatchPredictor
 from scgen.generator import Generator
 from scgen.io import bop
 from scgen.run.runner import RenderJob, run_render
@@ -447,3 +448,77 @@ def test_a_detection_under_the_score_floor_is_none(
     assert all(r["R"] is not None and r["flags"] != ["no_detection"] for r in found)
     for a, b in zip(found, floored, strict=True):  # a score is a probability: under 1
         assert b["flags"] == ["no_detection"] and b["R"] is None and b["score"] == a["score"] < 1
+
+
+def _same_pose(a: Pose, b: Pose, what: str) -> None:
+    """Equal to float rounding: another batch size is another GEMM blocking, which moves a float32
+    forward by ~sqrt(L K) u relative (tests/test_posenet_eval.py: the tiny network's L = 62 layers, widest
+    K = 1152, u = 6e-8, times five: 8e-5 of each output's scale, R's unit entries and |t|), here 1e-4 with
+    the detector's box (float32 pixels, u x 640 = 4e-5 px) moving the crop too; the box alike."""
+    assert a.flags == b.flags and (a.R is None) == (b.R is None), what
+    assert a.score == pytest.approx(b.score, rel=1e-4, abs=1e-6), what
+    if a.box is not None:
+        np.testing.assert_allclose(a.box, b.box, rtol=1e-4, atol=1e-3, err_msg=what)
+    if a.R is not None:
+        np.testing.assert_allclose(a.R, b.R, rtol=0, atol=1e-4, err_msg=what)
+        np.testing.assert_allclose(a.t, b.t, rtol=0, atol=1e-4 * np.linalg.norm(a.t), err_msg=what)
+        assert a.confidence == pytest.approx(b.confidence, abs=1e-4), what
+
+
+def test_the_batched_path_gives_the_one_at_a_time_poses(
+    user_folder: Path, pose_ckpt: Path, detector_ckpt: Path
+):
+    """BatchPredictor in batches of 3 over the test images at 640x480 (a camera of twice the training
+    size, so each is warped; the last batch short), the detector batched (FCOS's best box at fixed shapes),
+    given boxes mixed in, padded to fixed shapes or not, and with 3 passes (re-crops): the poses Predictor
+    gives one image at a time. Under the score floor both give no_detection with the same score."""
+    camera = read_camera_file(user_folder / "camera.json")
+    big = resized(camera, (640, 480))
+    images = [cv2.resize(cv2.imread(str(p)), (640, 480)) for p in sorted(user_folder.glob("frame*"))]
+    assert len(images) % 3 != 0  # the last batch is short: the padding is exercised
+    predictor = Predictor.load(pose_ckpt, detector_ckpt, min_score=0.0)
+    boxes = [None if i % 2 else (200.0, 150.0, 240.0, 180.0) for i in range(len(images))]
+    one = [predictor(image, big, box) for image, box in zip(images, boxes, strict=True)]
+    for fixed in (False, True):
+        batched = BatchPredictor(predictor, 3, detector_ckpt, fixed=fixed)
+        for i, (a, b) in enumerate(zip(one, batched(images, big, boxes), strict=True)):
+            _same_pose(a, b, f"image {i}, fixed {fixed}")
+        batched.close()
+    predictor.passes = 3  # re-crops batched too: each pass's boxes alike
+    recropped = [predictor(image, big, box) for image, box in zip(images, boxes, strict=True)]
+    again = BatchPredictor(predictor, 3, detector_ckpt)(images, big, boxes)
+    for i, (a, b) in enumerate(zip(recropped, again, strict=True)):
+        _same_pose(a, b, f"image {i}, 3 passes")
+        assert len(a.crops) == len(b.crops) > 0
+        np.testing.assert_allclose(a.crops, b.crops, rtol=1e-4, atol=1e-3, err_msg=f"image {i} crops")
+    predictor.passes = 1
+    predictor.min_score = 1.0  # a score is a probability: under 1
+    floored = BatchPredictor(predictor, 3, detector_ckpt)(images, big)
+    assert all(p.flags == ("no_detection",) and p.R is None for p in floored)
+    for i, p in enumerate(floored):
+        _same_pose(predictor(images[i], big), p, f"image {i} under the floor")
+    with pytest.raises(PosenetError, match="CUDA graphs need a CUDA device"):
+        BatchPredictor(predictor, 3, graphs=True)
+
+
+def test_predict_batch_writes_the_one_at_a_time_records(
+    user_folder: Path, pose_ckpt: Path, detector_ckpt: Path, tmp_path: Path
+):
+    """`posenet predict --batch 3`: the same records as without (poses to float rounding, as the Python
+    API's test bounds them), a frame's time_ms its batch's share; --track and --cuda-graphs on a CPU
+    are one-line refusals."""
+    common = [user_folder, "--ckpt", pose_ckpt, "--detector", detector_ckpt, "--camera", "training",
+              "--min-score", 0, "--no-vis"]  # fmt: skip
+    _invoke("predict", *common, "--out", tmp_path / "one")
+    _invoke("predict", *common, "--batch", 3, "--out", tmp_path / "three")
+    one, three = (_lines(tmp_path / d / "predictions.jsonl") for d in ("one", "three"))
+    assert [r["source"] for r in one] == [r["source"] for r in three]
+    for a, b in zip(one, three, strict=True):
+        assert a["flags"] == b["flags"] and set(b["time_ms"]) >= {"decode", "detector", "pose_network"}
+        np.testing.assert_allclose(a["R"], b["R"], rtol=0, atol=1e-4)
+        np.testing.assert_allclose(a["t"], b["t"], rtol=0, atol=1e-4 * np.linalg.norm(a["t"]))
+    for extra, message in [(["--track"], "takes no --batch"), (["--cuda-graphs"], "CUDA graphs need")]:
+        output = _invoke(
+            "predict", *common, "--batch", 2, *extra, "--device", "cpu", "--out", tmp_path / "x", code=1
+        )
+        assert message in output and not (tmp_path / "x").exists()

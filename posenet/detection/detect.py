@@ -13,8 +13,12 @@ from typing import Any
 
 import numpy as np
 import torch
+from torch import Tensor
 from torch.utils.data import DataLoader
 from torchvision.models.detection import FCOS
+from torchvision.models.detection.image_list import ImageList
+from torchvision.models.detection.transform import resize_boxes
+from torchvision.ops.boxes import clip_boxes_to_image
 from tqdm import tqdm
 
 from posenet.checkpoint import load_checkpoint
@@ -27,6 +31,7 @@ from posenet.detection.detector import (
     detector_config_from_dict,
     image_groups,
 )
+from posenet.detection.segmenter import MaskDetector, mask_box
 
 # predict's default score floor (--min-score): a best box scoring less is no detection. FCOS scores a best
 # box in any image; measured with the cpu preset trained 42 steps (6 min) on the tests' 24-image set, blank
@@ -74,6 +79,59 @@ def detect(model: FCOS, dataset: DetectionDataset, device: torch.device) -> list
             box = tuple(float(v) for v in pred["boxes"][best])
             out.append(Detection(key, box, float(pred["scores"][best]), toc))
     return out
+
+
+class BatchBestBox:
+    """The best box of each image of a batch at fixed shapes, for predict's batched path: `prepare` (FCOS's
+    own transform: normalise, resize, pad), then `run`, the fixed-shape part a caller may capture as one
+    CUDA graph (FCOS's backbone and head and an argmax over its scores, which is the box its NMS keeps
+    first, as posenet.export.onnx_export.DetectorBestBox; a mask detector's probabilities), then `boxes`.
+    Equal to the full detector's first detection per image (tests/test_posenet_predict.py)."""
+
+    def __init__(self, model: FCOS | MaskDetector) -> None:
+        self.model = model.eval()
+        self._anchors: dict[tuple[int, ...], Tensor] = {}  # per input shape: made once, outside a capture
+        self._sizes: tuple[tuple[int, int], tuple[int, int]] | None = None  # (original, resized) (h, w)
+
+    def prepare(self, images: Tensor) -> Tensor:
+        """B x 3 x H x W RGB in [0, 1] -> the network's input."""
+        if isinstance(self.model, MaskDetector):
+            return images
+        batch, _ = self.model.transform(list(images))
+        self._sizes = (tuple(images.shape[-2:]), batch.image_sizes[0])
+        return batch.tensors
+
+    def run(self, x: Tensor) -> tuple[Tensor, Tensor]:
+        """FCOS: the best box ([x0, y0, x1, y1] in the resized image, B x 4) and score (B); a mask detector:
+        the target's probability per pixel (B x H x W) and its peak (B)."""
+        if isinstance(self.model, MaskDetector):
+            prob = torch.sigmoid(self.model.logits(x)[:, 0])
+            return prob, prob.flatten(1).amax(1)
+        fcos = self.model
+        features = list(fcos.backbone(x).values())
+        head = {k: v.float() for k, v in fcos.head(features).items()}  # boxes decoded in float32 under bf16
+        key = tuple(x.shape[-2:])
+        if key not in self._anchors:
+            self._anchors[key] = fcos.anchor_generator(ImageList(x[:1], [key]), features)[0]  # type: ignore[list-item]
+        anchors = self._anchors[key]
+        scores = torch.sqrt(torch.sigmoid(head["cls_logits"]) * torch.sigmoid(head["bbox_ctrness"]))
+        best_score, best = scores.flatten(1).max(1)
+        anchor = best // scores.shape[-1]
+        rows = torch.arange(len(x), device=x.device)
+        box = fcos.box_coder.decode(head["bbox_regression"][rows, anchor], anchors[anchor])
+        assert self._sizes is not None, "prepare the batch first"
+        return clip_boxes_to_image(box, self._sizes[1]), best_score
+
+    def boxes(self, out: tuple[Tensor, Tensor]) -> list[tuple[np.ndarray, float] | None]:
+        """Per image: the best [x0, y0, x1, y1] (pixel edges of the input image) and score, or None where
+        the detector finds nothing (FCOS: no score over its score_thresh; a mask: mask_box's None)."""
+        first, scores = (v.float().cpu() for v in out)
+        if isinstance(self.model, MaskDetector):
+            return [mask_box(p, self.model.score_thresh) for p in first.numpy()]
+        assert self._sizes is not None
+        boxes = resize_boxes(first, list(self._sizes[1]), list(self._sizes[0])).double().numpy()
+        thresh = self.model.score_thresh
+        return [(b, float(s)) if s > thresh else None for b, s in zip(boxes, scores.tolist(), strict=True)]
 
 
 def detect_split(

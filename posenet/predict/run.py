@@ -15,7 +15,8 @@ from __future__ import annotations
 import itertools
 import json
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,8 +25,9 @@ import cv2
 import numpy as np
 
 from posenet.data.camera import Camera, CameraMismatch
+from posenet.predict.batch import BatchPredictor
 from posenet.predict.overlay import contact_sheet, draw_pose
-from posenet.predict.predictor import NO_DETECTION, Box, Predictor
+from posenet.predict.predictor import NO_DETECTION, Box, Pose, Predictor
 from posenet.predict.sources import Frame, load_frame
 from posenet.predict.track import Tracker
 from scgen.io import SequenceFrame, atomic_write_bytes, atomic_write_text, bop
@@ -67,28 +69,35 @@ def run_predict(
     warn: Callable[[str], None] = print,
     tracker: Tracker | None = None,
     sequence_of: Callable[[Frame], SequenceFrame | None] = lambda frame: None,
+    batched: BatchPredictor | None = None,
 ) -> PredictRun:
     """Predict every frame (a dataset frame brings its camera, else `camera`), writing into `out` (made
     by the caller). `box_for(frame, index)` gives a frame's box, None for the detector's, MISS for none.
     With a `tracker`, a frame without a given box is seeded from the last pose (posenet.predict.track),
     restarted where `sequence_of` (a frame's sequence, frame number and time; None outside a sequence
-    dataset) says a new sequence begins; each record then names its box_source."""
+    dataset) says a new sequence begins; each record then names its box_source. With `batched` (not with
+    a tracker), frames are loaded in its thread pool and predicted `batched.size` at a time (_batches)."""
     run, tic = PredictRun(), time.perf_counter()
     sheet_every = max(1, total // SHEET_TILES)
     sheet: list[np.ndarray] = []
     writer: cv2.VideoWriter | None = None
     if vis and not video_fps:
         (out / "overlays").mkdir(exist_ok=True)
-    stream, noted = iter(frames), set()
+    noted: set[str] = set()
+    stream = iter(frames) if batched is None else _batches(frames, batched, camera, box_for)
     sequence: int | None = None  # the sequence of the frame before
     for index in itertools.count():
         before = {s: len(v) for s, v in predictor.timings.ms.items()}
         t0 = time.perf_counter()  # a file or video frame is decoded by the stream, a dataset's by load_frame
-        frame = next(stream, None)
-        if frame is None:
+        item = next(stream, None)
+        if item is None:
             break
-        frame = load_frame(frame)
-        predictor.timings.add("decode", time.perf_counter() - t0)
+        ready, shares = None, None  # with `batched`: the frame's pose and its share of its batch's ms
+        if batched is None:
+            frame = load_frame(item)  # type: ignore[arg-type]
+            predictor.timings.add("decode", time.perf_counter() - t0)
+        else:
+            frame, ready, shares = item  # type: ignore[misc]
         base: dict[str, Any] = {"source": frame.name, "index": index}
         if frame.key is not None:
             base |= {"scene_id": frame.key[0], "im_id": frame.key[1]}
@@ -111,6 +120,8 @@ def run_predict(
             box = box_for(frame, index)
             if box == MISS:
                 pose = NO_DETECTION
+            elif ready is not None:
+                pose = ready
             elif tracker is not None:
                 pose, source = tracker(frame.image, cam, box)  # type: ignore[arg-type]
                 base["box_source"] = source
@@ -130,7 +141,10 @@ def run_predict(
                     sheet.append(drawn)
                 predictor.timings.add("drawing", time.perf_counter() - t1)
             spent = {s: v[before.get(s, 0) :] for s, v in predictor.timings.ms.items()}
-            time_ms = {s: round(sum(v), 3) for s, v in spent.items() if v}
+            time_ms = {
+                s: round(sum(v), 3) for s, v in spent.items() if v and (shares is None or s == "drawing")
+            }
+            time_ms = (shares or {}) | time_ms
             run.records.append({**base, **pose.to_json(), "obj_id": predictor.obj.obj_id, "time_ms": time_ms})
         if progress is not None:
             progress(1)
@@ -140,6 +154,50 @@ def run_predict(
     run.seconds = time.perf_counter() - tic
     _write_outputs(run, out, formats, sheet)
     return run
+
+
+def _batches(
+    frames: Iterable[Frame],
+    batched: BatchPredictor,
+    camera: Camera | None,
+    box_for: Callable[[Frame, int], Box | str | None],
+) -> Iterator[tuple[Frame, Pose | None, dict[str, float]]]:
+    """The frames loaded in `batched`'s pool, the next batch while one is predicted, and predicted
+    `batched.size` at a time: each with its pose (None where it has no camera or its box is MISS) and its
+    share of its batch's milliseconds by stage (decode: the wait for the batch)."""
+    stream, timings = iter(frames), batched.predictor.timings
+
+    def load() -> list[Frame]:
+        return list(batched.pool.map(load_frame, itertools.islice(stream, batched.size)))
+
+    index = 0
+    with ThreadPoolExecutor(1) as ahead:
+        coming = ahead.submit(load)
+        while True:
+            tic = time.perf_counter()
+            chunk = coming.result()
+            if not chunk:
+                return
+            coming = ahead.submit(load)
+            before = {s: len(v) for s, v in timings.ms.items()}
+            for _ in chunk:
+                timings.add("decode", (time.perf_counter() - tic) / len(chunk))
+            wanted = []
+            for i, frame in enumerate(chunk):
+                cam, error = _camera_for(frame, camera)
+                box = box_for(frame, index + i) if error is None else MISS
+                if box != MISS:
+                    wanted.append((i, cam, box))
+            poses: list[Pose | None] = [None] * len(chunk)
+            images = [chunk[i].image for i, _, _ in wanted]
+            found = batched(images, [c for _, c, _ in wanted], [b for _, _, b in wanted])  # type: ignore[misc]
+            for (i, _, _), pose in zip(wanted, found, strict=True):
+                poses[i] = pose
+            spent = {s: sum(v[before.get(s, 0) :]) / len(chunk) for s, v in timings.ms.items()}
+            shares = {s: round(v, 3) for s, v in spent.items() if v}
+            for frame, pose in zip(chunk, poses, strict=True):
+                yield frame, pose, shares
+            index += len(chunk)
 
 
 def _camera_for(frame: Frame, camera: Camera | None) -> tuple[Camera | None, str | None]:
