@@ -30,7 +30,7 @@ from posenet.data.dataset import image_tensor, roi_geometry, roi_image
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose
 from posenet.predict.pixels import to_bgr8
-from posenet.predict.predictor import NO_DETECTION, Box, Pose, Predictor, pose_flags
+from posenet.predict.predictor import NO_DETECTION, Box, Pose, Predictor, detector_box, pose_flags
 from posenet.predict.recrop import projected_box
 
 WARMUP = 3  # eager runs on a side stream before a capture (cuDNN picks its kernels; lazy buffers made)
@@ -265,9 +265,3 @@ class BatchPredictor:
         share = (time.perf_counter() - tic) / n
         for _ in range(n):
             self.predictor.timings.add(stage, share)
-
-
-def detector_box(edges: np.ndarray, score: float) -> tuple[Box, float]:
-    """A detector's [x0, y0, x1, y1] pixel edges as a posenet box [x, y, w, h] (pixels x .. x + w - 1)."""
-    x0, y0, x1, y1 = (float(v) for v in edges)
-    return (x0 + 0.5, y0 + 0.5, x1 - x0, y1 - y0), score

@@ -179,11 +179,7 @@ class Predictor:
         if self.detector is None:
             raise PosenetError("no detector loaded: give --detector, --box or --boxes")
         found = self.detector(image[..., ::-1].astype(np.float32) / 255.0)
-        if found is None:
-            return None
-        (x0, y0, x1, y1), score = found
-        # detector boxes are pixel edges; posenet boxes cover pixels x .. x + w - 1 (centres at integers)
-        return (float(x0) + 0.5, float(y0) + 0.5, float(x1 - x0), float(y1 - y0)), score
+        return None if found is None else detector_box(*found)
 
     def __call__(self, image: np.ndarray, camera: Camera | np.ndarray, box: Box | None = None) -> Pose:
         """The pose in `image` seen by `camera` (a Camera, or a 3x3 K for a pinhole camera), at `box`
@@ -243,6 +239,13 @@ class Predictor:
             return 0.0
         error = np.linalg.norm(project(points, R, t, self.camera) - pixels, axis=1)  # a pinhole camera
         return float(np.mean(error <= roi.scale / self.output_res))
+
+
+def detector_box(edges: np.ndarray, score: float) -> tuple[Box, float]:
+    """A detector's [x0, y0, x1, y1] pixel edges as a posenet box [x, y, w, h], covering pixels x .. x + w - 1
+    (centres at integers), with its score."""
+    x0, y0, x1, y1 = edges
+    return (float(x0) + 0.5, float(y0) + 0.5, float(x1 - x0), float(y1 - y0)), score
 
 
 def onnx_network(path: Path, input_res: int) -> Network:
