@@ -153,13 +153,15 @@ def _epoch(
     model.train()
     tic = time.perf_counter()
     for images, targets in loader:
+        wait = time.perf_counter() - tic  # the host idle for the loader since the last step
         lr = optimizer.param_groups[0]["lr"]
         terms = detector_step(model, optimizer, images, targets, device)
         scheduler.step()
         step += 1
         toc = time.perf_counter()
         loss = sum(terms.values())
-        log.step({"step": step, "epoch": epoch, "lr": lr, "step_s": toc - tic, "loss": loss, **terms})
+        times = {"step_s": toc - tic, "wait_s": wait, "images": len(images)}  # as pose training logs them
+        log.step({"step": step, "epoch": epoch, "lr": lr, "loss": loss, **times, **terms})
         tic = toc
         if budget is not None:
             stop = _follow_budget(budget, step, toc, log)
