@@ -55,6 +55,17 @@ minutes_option = click.option(
 )
 
 
+# posenet eval's and predict's: both re-crop through posenet.predict.recrop
+passes_option = click.option(
+    "--passes",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Pose network runs per image: 1 on the box, then each re-cropped around the model's box at the "
+    "pose before (posenet.predict.recrop); eval gives the box IoU with the true box per pass.",
+)
+
+
 @click.group(cls=OneLineErrorGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="scgen", prog_name="posenet")  # one distribution holds both packages
 def main() -> None:
@@ -155,14 +166,7 @@ def train(
     show_default=True,
     help="Pose solver: the network's Patch-PnP, OpenCV's PnP-RANSAC on its predicted xyz and mask, or both.",
 )
-@click.option(
-    "--passes",
-    type=click.IntRange(min=1),
-    default=1,
-    show_default=True,
-    help="Pose network runs per image: 1 on the boxes, then each re-cropped around the model's box at the "
-    "poses before (as predict --passes); the box IoU with the true box is given per pass.",
-)
+@passes_option
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json, --predictions or --bop-csv.")
 def eval_cmd(
     data: Path,
@@ -504,14 +508,7 @@ def viz(
     show_default=True,
     help="The detector's score floor: a best box scoring less is no detection (flag no_detection).",
 )
-@click.option(
-    "--passes",
-    type=click.IntRange(min=1),
-    default=1,
-    show_default=True,
-    help="Pose network runs per image: 1 on the box, then each re-cropped around the model's box at the "
-    "pose before (posenet.predict.recrop).",
-)
+@passes_option
 @click.option(
     "--track",
     is_flag=True,
