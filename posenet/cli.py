@@ -224,12 +224,12 @@ def eval_cmd(
                            obj_id=obj_id, passes=passes)  # fmt: skip
     variant, summaries = results[methods[0]].variant, [r.summary for r in results.values()]
     click.echo(f"boxes: {summaries[0]['boxes']}")
-    click.echo(
-        "crop box IoU with bbox_obj, per pass: " + ", ".join(f"{v:.3f}" for v in summaries[0]["box_iou"])
-    )
     columns = ["value"] if methods == ("patch",) else [PNP_LABELS[m] for m in methods]
     rows = summary_rows(summaries, keys=set().union(*summaries))
     click.echo(format_table([f"{variant} on {split}", *columns], rows))
+    click.echo(  # under the table, which stays right under its boxes line
+        "crop box IoU with bbox_obj, per pass: " + ", ".join(f"{v:.3f}" for v in summaries[0]["box_iou"])
+    )
     for m, figures in per_sequence(data, split, results).items():  # a sequence dataset: the tracker baseline
         results[m].summary["sequences"] = figures
         click.echo(sequence_table(figures, f"sequence ({PNP_LABELS[m]})" if len(methods) > 1 else "sequence"))
