@@ -81,6 +81,17 @@ def detect(model: FCOS, dataset: DetectionDataset, device: torch.device) -> list
     return out
 
 
+def fcos_best_box(fcos: FCOS, head: dict[str, Tensor], anchors: Tensor) -> tuple[Tensor, Tensor]:
+    """Each image's best-scoring box ([x0, y0, x1, y1] in the network's resized image, B x 4) and its score
+    (B) from FCOS's head outputs over `anchors`: the score is FCOS's sqrt(class x centre-ness), and the best
+    one is the box its NMS keeps first, so this is the full detector's first detection, at fixed shapes."""
+    scores = torch.sqrt(torch.sigmoid(head["cls_logits"]) * torch.sigmoid(head["bbox_ctrness"]))
+    best_score, best = scores.flatten(1).max(1)
+    anchor = best // scores.shape[-1]
+    rows = torch.arange(len(best), device=best.device)
+    return fcos.box_coder.decode(head["bbox_regression"][rows, anchor], anchors[anchor]), best_score
+
+
 class BatchBestBox:
     """The best box of each image of a batch at fixed shapes, for predict's batched path: `prepare` (FCOS's
     own transform: normalise, resize, pad), then `run`, the fixed-shape part a caller may capture as one
@@ -114,11 +125,7 @@ class BatchBestBox:
         if key not in self._anchors:
             self._anchors[key] = fcos.anchor_generator(ImageList(x[:1], [key]), features)[0]  # type: ignore[list-item]
         anchors = self._anchors[key]
-        scores = torch.sqrt(torch.sigmoid(head["cls_logits"]) * torch.sigmoid(head["bbox_ctrness"]))
-        best_score, best = scores.flatten(1).max(1)
-        anchor = best // scores.shape[-1]
-        rows = torch.arange(len(x), device=x.device)
-        box = fcos.box_coder.decode(head["bbox_regression"][rows, anchor], anchors[anchor])
+        box, best_score = fcos_best_box(fcos, head, anchors)
         assert self._sizes is not None, "prepare the batch first"
         return clip_boxes_to_image(box, self._sizes[1]), best_score
 

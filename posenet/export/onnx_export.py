@@ -23,6 +23,7 @@ import torchvision.ops.boxes as box_ops
 from onnxscript import opset18 as op
 from torch import Tensor, nn
 
+from posenet.detection.detect import fcos_best_box
 from posenet.detection.segmenter import MaskDetector, mask_box
 from posenet.models import PoseNet
 
@@ -131,16 +132,11 @@ class DetectorBestBox(nn.Module):
         features = list(self.fcos.backbone(images.tensors).values())
         head = self.fcos.head(features)
         anchors = self.fcos.anchor_generator(images, features)[0]
-        scores = torch.sqrt(torch.sigmoid(head["cls_logits"][0]) * torch.sigmoid(head["bbox_ctrness"][0]))
-        best = torch.argmax(scores.flatten())
-        anchor = best // scores.shape[-1]
-        box = self.fcos.box_coder.decode(
-            head["bbox_regression"][0][anchor : anchor + 1], anchors[anchor : anchor + 1]
-        )
+        box, score = fcos_best_box(self.fcos, head, anchors)
         rh, rw = images.image_sizes[0]
         box = box_ops.clip_boxes_to_image(box, (rh, rw))
         scale = torch.tensor([width / rw, height / rh, width / rw, height / rh], dtype=box.dtype)
-        return box[0] * scale, scores.flatten()[best]
+        return box[0] * scale, score[0]
 
 
 class MaskProbabilities(nn.Module):
