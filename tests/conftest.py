@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 import pytest
+from shared_dirs import shared_dir
 
 from scgen.run.runner import RenderJob, run_render
 from scgen.scenes.model import TargetModel, load_target
@@ -25,7 +26,7 @@ def render_dataset(out: Path, n: int, seed: int = 0, **kwargs) -> Path:
 @pytest.fixture(scope="session")
 def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """12 samples of seed 0: shared, read-only for the tests that use it."""
-    return render_dataset(tmp_path_factory.mktemp("ds") / "small", n=12)
+    return shared_dir(tmp_path_factory, "small", lambda out: render_dataset(out, n=12))
 
 
 @pytest.fixture(scope="session")
@@ -42,9 +43,11 @@ SEQUENCE = {"frames": 4, "dt_s": 3.0, "spacecraft_diameter_m": 20.0}
 def sequence_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """3 rendezvous sequences of SEQUENCE's 4 frames (seed 0, Mitsuba, 64x48, draft): 2 in train, 1 in test.
     Shared, read-only for the tests that use it."""
-    out = tmp_path_factory.mktemp("seq") / "sequences"
-    job = RenderJob(out=out, n=3, seed=0, backend="mitsuba", quality="draft", resolution=(64, 48),
-                    overrides={"sequence": SEQUENCE}, split_by="random",
-                    ratios=(0.67, 0.0, 0.33))  # fmt: skip
-    run_render(job, progress=False)
-    return out
+
+    def build(out: Path) -> None:
+        job = RenderJob(out=out, n=3, seed=0, backend="mitsuba", quality="draft", resolution=(64, 48),
+                        overrides={"sequence": SEQUENCE}, split_by="random",
+                        ratios=(0.67, 0.0, 0.33))  # fmt: skip
+        run_render(job, progress=False)
+
+    return shared_dir(tmp_path_factory, "sequences", build)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from shared_dirs import shared_dir
 
 from posenet.cli import main as posenet_main
 from scgen.run.runner import RenderJob, run_render
@@ -32,31 +33,26 @@ AS_BEFORE_REALISM = {
 
 def posenet_dataset(tmp_path_factory: pytest.TempPathFactory, seed: int = 0) -> Path:
     """N_IMAGES samples of `seed` rendered with Mitsuba at 320x240 as before scgen's realism
-    (AS_BEFORE_REALISM), read-only for tests; seed 1's are scenes the seed-0 set never holds.
+    (AS_BEFORE_REALISM), read-only for tests; seed 1's are scenes the seed-0 set never holds. Rendered
+    once per session, shared by every module and worker (shared_dirs)."""
 
-    Cached under the session's base temp dir (rendered to a sibling, then renamed), so every test
-    module asking for it shares one rendering.
-    """
-    out = tmp_path_factory.getbasetemp() / ("posenet_ds" if seed == 0 else f"posenet_ds_seed{seed}")
-    if not out.is_dir():
-        tmp = out.with_name(f"{out.name}.partial")
+    def build(out: Path) -> None:
         job = RenderJob(
-            out=tmp, n=N_IMAGES, seed=seed, backend="mitsuba", quality="draft", resolution=RESOLUTION,
+            out=out, n=N_IMAGES, seed=seed, backend="mitsuba", quality="draft", resolution=RESOLUTION,
             camera="ideal", overrides=AS_BEFORE_REALISM,
         )  # fmt: skip
         run_render(job, progress=False)
-        tmp.rename(out)
-    return out
+
+    return shared_dir(tmp_path_factory, "posenet_ds" if seed == 0 else f"posenet_ds_seed{seed}", build)
 
 
 def occluded_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """6 samples of seed 0, all in 'train', each target 80-95 % hidden by an occluder (the heavy group)."""
-    out = tmp_path_factory.getbasetemp() / "posenet_occluded_ds"
-    if not out.is_dir():
-        tmp = out.with_name("posenet_occluded_ds.partial")
+
+    def build(out: Path) -> None:
         heavy = {"group_probs": {"none": 0.0, "slight": 0.0, "moderate": 0.0, "heavy": 1.0}}
         job = RenderJob(
-            out=tmp,
+            out=out,
             n=6,
             seed=0,
             backend="mitsuba",
@@ -66,18 +62,22 @@ def occluded_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
             ratios=(1.0, 0.0, 0.0),
         )
         run_render(job, progress=False)
-        tmp.rename(out)
-    return out
+
+    return shared_dir(tmp_path_factory, "posenet_occluded_ds", build)
 
 
 def tiny_pose_checkpoint(
-    dataset: Path, tmp_path_factory: pytest.TempPathFactory, name: str, variant: str = "gdrnet"
+    dataset: Path, tmp_path_factory: pytest.TempPathFactory, variant: str = "gdrnet"
 ) -> Path:
-    """`posenet train` with TINY_POSE (of `variant`) for 2 steps on `dataset`; the path of its last.pt."""
-    root = tmp_path_factory.mktemp(name)
-    (root / "tiny.yaml").write_text(TINY_POSE)
-    args = ["train", "--data", dataset, "--out", root / "run", "--config", root / "tiny.yaml"]
-    args += ["--max-steps", 2, "--variant", variant]
-    res = CliRunner().invoke(posenet_main, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
-    return root / "run" / "last.pt"
+    """`posenet train` with TINY_POSE (of `variant`) for 2 steps on `dataset`; the path of its last.pt.
+    Trained once per session for each dataset and variant, shared read-only (shared_dirs)."""
+
+    def build(root: Path) -> None:
+        root.mkdir(parents=True)
+        (root / "tiny.yaml").write_text(TINY_POSE)
+        args = ["train", "--data", dataset, "--out", root / "run", "--config", root / "tiny.yaml"]
+        args += ["--max-steps", 2, "--variant", variant]
+        res = CliRunner().invoke(posenet_main, [str(a) for a in args])
+        assert res.exit_code == 0, res.output
+
+    return shared_dir(tmp_path_factory, f"tiny_{variant}_on_{dataset.name}", build) / "run" / "last.pt"

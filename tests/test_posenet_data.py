@@ -232,7 +232,7 @@ def test_a_truncated_image_is_refused_alike_by_train_train_detector_eval_and_box
 ) -> None:
     """One train and one test image cut to 200 bytes, as a broken copy leaves them: every command that
     reads the split refuses it before any work, in one line naming the file, and writes nothing."""
-    ckpt = tiny_pose_checkpoint(dataset_dir, tmp_path_factory, "whole")
+    ckpt = tiny_pose_checkpoint(dataset_dir, tmp_path_factory)
     broken = tmp_path / "broken"
     shutil.copytree(dataset_dir, broken)
     cut = {}

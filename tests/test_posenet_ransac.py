@@ -47,7 +47,7 @@ def test_ground_truth_xyz_and_mask_give_the_ground_truth_pose(dataset_dir: Path)
 def test_eval_pnp_both_sets_ransac_beside_patch(
     dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
 ) -> None:
-    ckpt = tiny_pose_checkpoint(dataset_dir, tmp_path_factory, "ransac")
+    ckpt = tiny_pose_checkpoint(dataset_dir, tmp_path_factory)
     out = tmp_path / "test.json"
     args = ["eval", "--data", dataset_dir, "--ckpt", ckpt, "--json", out, "--workers", 0, "--pnp", "both"]
     res = CliRunner().invoke(main, [str(a) for a in args])

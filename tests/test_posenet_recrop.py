@@ -44,7 +44,7 @@ def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory, "recrop_pose")
+    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory)
 
 
 def _instances(root: Path, split: str = "test") -> list:
@@ -135,7 +135,7 @@ def test_eval_passes_recrop_and_report_the_box_iou(dataset_dir: Path, pose_ckpt:
 
 @pytest.fixture(scope="module")
 def sequence_ckpt(sequence_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tiny_pose_checkpoint(sequence_dataset, tmp_path_factory, "track_pose")
+    return tiny_pose_checkpoint(sequence_dataset, tmp_path_factory)
 
 
 def test_a_tracked_sequence_keeps_its_target(sequence_dataset: Path, sequence_ckpt: Path):

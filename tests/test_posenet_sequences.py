@@ -85,7 +85,7 @@ def test_eval_on_a_sequence_split_reports_each_sequence(
     """A tiny checkpoint on a real render: one table row and one `sequences` entry per sequence of the
     split, its frames in time order, and the truth's jitter (the rendered dynamics) far below the
     estimate's."""
-    ckpt = tiny_pose_checkpoint(sequence_dataset, tmp_path_factory, "seq_run")
+    ckpt = tiny_pose_checkpoint(sequence_dataset, tmp_path_factory)
     out = tmp_path / "eval.json"
     args = ["eval", "--data", sequence_dataset, "--ckpt", ckpt, "--split", "train", "--json", out]
     res = CliRunner().invoke(main, [str(a) for a in [*args, "--workers", 0]])
