@@ -102,9 +102,10 @@ def test_the_sun_is_drawn_near_the_view_for_a_share_of_the_samples_without_a_cas
     cfg = load_config()
     off = load_config(overrides={"illumination": {"sun_near_view": {"prob": 0.0}}})
     near, plain = Generator(spacecraft, cfg, 21), Generator(spacecraft, off, 21)
-    moved = []
+    moved, no_caster = [], 0
     for i in range(800):
         a, b = near.scene(i), plain.scene(i)
+        no_caster += not b.shadow_caster
         assert (a.target, a.camera, a.props, a.requested_occlusion) == (b.target, b.camera, b.props,
                                                                         b.requested_occlusion)  # fmt: skip
         if a.sun != b.sun:
@@ -112,7 +113,6 @@ def test_the_sun_is_drawn_near_the_view_for_a_share_of_the_samples_without_a_cas
             view = sun_view(a.camera, np.asarray(a.sun.direction))
             assert view is not None and view.off_view_rad < FLARE_REACH_RAD
             moved.append(i)
-    no_caster = sum(not plain.scene(i).shadow_caster for i in range(800))
     expected = cfg["illumination"]["sun_near_view"]["prob"] * no_caster
     assert abs(len(moved) - expected) < 3.5 * np.sqrt(expected), (len(moved), expected)
     with Generator(spacecraft, load_config(resolution=(96, 72)), 21, backend="mitsuba",
