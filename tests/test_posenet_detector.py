@@ -12,7 +12,9 @@ import cv2
 import numpy as np
 import pytest
 import torch
+from budget_checks import assert_the_decay_ends_at_the_budget
 from click.testing import CliRunner
+from float_bounds import forward_rel
 from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
@@ -23,6 +25,7 @@ from posenet.detection.detector import (
     detector_config_from_dict,
     hflip,
     image_groups,
+    load_detector_config,
     paste_target,
     target_boxes,
     visible_boxes,
@@ -58,7 +61,7 @@ def detector_run(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) ->
 
 @pytest.fixture(scope="module")
 def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory, "pose")
+    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory)
 
 
 def test_detector_learns_its_boxes(dataset_dir: Path, detector_run: Path) -> None:
@@ -246,15 +249,19 @@ def test_the_mask_detector_trains_and_runs_in_onnxruntime(dataset_dir: Path, tmp
     graph = tmp_path / "mask.onnx"
     export_detector_onnx(model, graph, (320, 240), state["model_config"]["score_thresh"])
     session = onnx_session(graph)
+    rel = forward_rel(model)
     boxed = 0
     for insts in image_groups(dataset_dir, "train", 1)[:4]:
         rgb = cv2.cvtColor(cv2.imread(str(insts[0].rgb)), cv2.COLOR_BGR2RGB).astype(np.float32) / 255
         image = torch.from_numpy(rgb.transpose(2, 0, 1))[None]
         with torch.inference_mode():
             want = MaskProbabilities(model)(image)[0].numpy()
+            logits = float(model.logits(image).abs().max())
             on_torch = model([image[0]])[0]
         (got,) = session.run(None, {"image": image.numpy()})
-        assert np.abs(got[0] - want).max() < 1e-4
+        # onnxruntime sums in another order: a logit moves by float_bounds' rel of the logits' scale, a
+        # probability by at most a quarter of that (the sigmoid's slope)
+        assert np.abs(got[0] - want).max() <= rel * logits / 4
         on_onnx = run_detector_onnx(session, rgb)
         assert (on_onnx is None) == (len(on_torch["boxes"]) == 0)
         if on_onnx is not None:
@@ -280,13 +287,16 @@ def test_minutes_fit_the_detector_schedule_to_the_budget(dataset_dir: Path, tmp_
     assert fitted, out
     total = int(fitted[1])
     rows = [json.loads(ln) for ln in (run / "train_log.jsonl").read_text().splitlines()]
-    assert 0.9 * total <= rows[-1]["step"] <= total
-    assert rows[-1]["lr"] < 0.1 * max(r["lr"] for r in rows)
-    assert 0.8 * 24.0 < wall < 24.0 + 15.0  # the budget, then the last checkpoint and its val scoring
-    assert torch.load(run / "last.pt", weights_only=False)["schedule_steps"] == total
-    _invoke("train-detector", "--data", dataset_dir, "--out", run, "--resume", "--max-steps", total + 2)
+    schedule = torch.load(run / "last.pt", weights_only=False)["schedule_steps"]
+    anneal_point = load_detector_config(str(tmp_path / "tiny.yaml")).optim.anneal_point
+    assert_the_decay_ends_at_the_budget(rows, total, schedule, anneal_point)
+    # it stops at the budget or at its schedule's end, never before both; past the budget by at most the
+    # step under way, then the last checkpoint and its val scoring
+    assert wall >= 24.0 or rows[-1]["step"] == schedule
+    assert wall < 24.0 + rows[-1]["step_s"] + 15.0
+    _invoke("train-detector", "--data", dataset_dir, "--out", run, "--resume", "--max-steps", schedule + 2)
     last = json.loads((run / "train_log.jsonl").read_text().splitlines()[-1])
-    assert last["step"] == total  # the fitted schedule's end, not past it toward the config's 500 epochs
+    assert last["step"] == schedule  # the fitted schedule's end, not past it toward the config's 500 epochs
     res = CliRunner().invoke(main, ["train-detector", "--data", str(dataset_dir), "--out", str(run),
                                     "--resume", "--minutes", "1"])  # fmt: skip
     assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1

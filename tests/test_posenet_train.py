@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -14,6 +15,7 @@ from pathlib import Path
 import pytest
 import torch
 import yaml
+from budget_checks import assert_the_decay_ends_at_the_budget
 from click.testing import CliRunner
 from posenet_helpers import posenet_dataset
 
@@ -225,7 +227,6 @@ def test_a_time_budget_refits_the_schedule_to_the_time_left_and_fixes_it_when_th
         times.append(clock)
         if budget.update(step, clock):
             froze_at = step
-    assert not budget.update(step + 1, clock + 0.5) and budget.frozen  # fixed from here on
     # the steps left at the recent rate (the later half of the steps done) fill the time left
     since = froze_at // 2
     rate = (clock - times[since - 1]) / (froze_at - since)
@@ -234,27 +235,57 @@ def test_a_time_budget_refits_the_schedule_to_the_time_left_and_fixes_it_when_th
     # the speed-up is in the estimate: at 0.5 s a step the fitted end falls within 2 % of the budget
     assert abs(clock + 0.5 * (budget.total - froze_at) - 100.0) < 2.0
     assert budget.expired(100.0) and not budget.expired(99.9)
+    fitted = budget.total  # at the fitted rate the decay keeps it: the next step is a step ahead of the clock
+    assert not budget.update(froze_at + 1, clock + 0.5) and budget.frozen and budget.total == fitted
 
 
-def test_minutes_train_a_fitted_schedule_that_ends_at_the_budget(
-    dataset_dir: Path, tiny_config: Path, tmp_path: Path
-) -> None:
+def test_a_time_budget_that_slows_during_the_decay_brings_its_end_forward() -> None:
+    """0.1 s a step until the cosine begins, then 0.3 s: the steps left no longer fit the time left, so
+    the total comes forward (never back) and the rate the run ends on is the cosine's end, as the train
+    loop sets it (the scheduler's rate for step s + 1 computed before the budget sees step s)."""
+    o = OptimConfig(warmup_iters=0, anneal_point=0.72)
+    budget = TimeBudget(seconds=100.0, anneal_point=o.anneal_point, start=0.0)
+    clock, step, lr, used = 0.0, 0, lr_factor(0, budget.total, o), []
+    while True:
+        step += 1
+        clock += 0.3 if budget.frozen else 0.1
+        used.append(lr)
+        lr = lr_factor(step, budget.total, o)  # scheduler.step(), then the budget's update
+        if budget.update(step, clock):
+            fitted, decay_start, start_clock = budget.total, step, clock
+        if budget.expired(clock) or step >= budget.total:
+            break
+    assert budget.total < fitted and step <= budget.total  # a third of the fitted steps fit the time left
+    assert all(b <= a for a, b in zip(used[decay_start:], used[decay_start + 1 :], strict=False))
+    # the rate of the last step lags the clock by at most two steps (0.6 s) of the decay's time, 100 - the
+    # clock at the cosine's start: progress >= 1 - 0.6 / (100 - start_clock), the rate (1 + cos) / 2 of it
+    lag = 0.6 / (100.0 - start_clock)
+    assert used[-1] <= (1 + math.cos(math.pi * (1 - lag))) / 2
+    without = (1 + math.cos(math.pi * (step - decay_start) / (fitted - decay_start))) / 2
+    assert without > 0.5  # where the total stayed fixed, the run would have stopped with half its rate left
+
+
+def test_minutes_train_a_fitted_schedule_that_ends_at_the_budget(dataset_dir: Path, tmp_path: Path) -> None:
     run = tmp_path / "budget"
+    # one thread: two threads' OpenMP barriers on a loaded 2-core machine stretched the tiny steps to 17 s,
+    # where one thread slows only by its share of the cores
+    config = tmp_path / "one_thread.yaml"
+    config.write_text(TINY.replace("ckpt_every: 100}", "ckpt_every: 100, threads: 1}"))
     tic = time.perf_counter()
-    code, out = posenet(
-        "train", "--data", dataset_dir, "--out", run, "--config", tiny_config, "--minutes", 0.5
-    )
+    code, out = posenet("train", "--data", dataset_dir, "--out", run, "--config", config, "--minutes", 0.5)
     wall = time.perf_counter() - tic
     assert code == 0, out
     fitted = re.search(r"schedule fitted to (\d+) steps, cosine from step (\d+)", out)
     assert fitted, out
     total, cosine = int(fitted[1]), int(fitted[2])
+    assert cosine >= OptimConfig().anneal_point * total
     rows = [json.loads(ln) for ln in (run / "train_log.jsonl").read_text().splitlines()]
-    # the cosine ran to its end, or nearly: a step slower than the fit's estimate stops it at the budget
-    assert 0.9 * total <= rows[-1]["step"] <= total and cosine >= 0.72 * total
-    assert rows[-1]["lr"] < 0.1 * max(r["lr"] for r in rows)
-    assert 0.8 * 30.0 < wall < 30.0 + 8.0  # the budget, give or take the checkpoint written at the end
-    assert torch.load(run / "last.pt", weights_only=False)["schedule_steps"] == total
+    schedule = torch.load(run / "last.pt", weights_only=False)["schedule_steps"]
+    assert_the_decay_ends_at_the_budget(rows, total, schedule, OptimConfig().anneal_point)
+    # it stops at the budget or at its schedule's end, never before both; past the budget by at most the
+    # step under way and the checkpoint written at the end
+    assert wall >= 30.0 or rows[-1]["step"] == schedule
+    assert wall < 30.0 + rows[-1]["step_s"] + 8.0
     code, out = posenet("train", "--data", dataset_dir, "--out", run, "--resume", "--minutes", 1)
     assert (
         code == 1
