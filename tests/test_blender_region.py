@@ -13,8 +13,6 @@ many-sample reference, i.e. it keeps the quality the presets are chosen by (benc
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
@@ -25,7 +23,7 @@ from scgen.render.blender.scene import border_fractions
 from scgen.render.blender.settings import QualityPreset, configure_beauty
 from scgen.render.conventions import CLIP_START_M
 from scgen.render.region import Region, covered_region, full_frame
-from scgen.scenes.spec import Pose, SunSpec
+from tests.region_cases import CASES, OCCLUDED, partly_out_of_view, rms_over_objects
 
 SIZE = (160, 120)
 LABELS = ("depth", "instance", "target_depth", "normal", "sun_blocked")
@@ -64,8 +62,7 @@ def test_border_fractions_give_every_pixel_edge_exactly(size):
 
 @pytest.fixture(scope="module")
 def generator():
-    overrides = {"occluders": {"group_probs": {"none": 0.0, "slight": 0.0, "moderate": 1.0, "heavy": 0.0}}}
-    return Generator.load(seed=3, resolution=SIZE, overrides=overrides)
+    return Generator.load(seed=3, resolution=SIZE, overrides=OCCLUDED)
 
 
 @pytest.fixture(scope="module")
@@ -82,40 +79,6 @@ def both(backend: BlenderBackend, spec) -> tuple[Buffers, Buffers, object]:
     backend.trace_region = True
     region = backend.render(spec)
     return full, region, backend.scene.region
-
-
-def partly_out_of_view(spec):
-    """The target moved so that its centre projects onto the frame's left edge."""
-    t = spec.target.t_vec.copy()
-    K = spec.camera.K_mat
-    t[0] = -K[0, 2] * t[2] / K[0, 0]
-    return replace(spec, target=Pose(spec.target.R, tuple(t)))
-
-
-def occluder_across_the_frame(spec):
-    """The first prop made a truss along the image's rows, so near the camera that it spans the frame's
-    width (a band: not the whole frame)."""
-    K, width = spec.camera.K_mat, spec.camera.width
-    length = 0.2
-    z = 0.75 * length * K[0, 0] / width  # its length projects onto 4/3 of the width
-    identity = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
-    pose = Pose(identity, (0.0, 0.0, z))
-    truss = replace(spec.props[0], shape="truss", size=(length, 0.03, 0.03), pose=pose)
-    return replace(spec, props=(truss, *spec.props[1:]))
-
-
-def sun_in_view(spec):
-    """The sun just off the optical axis: its disc, ghosts and veiling glare over the whole image."""
-    s = np.array([0.05, -0.03, 1.0])
-    return replace(spec, sun=SunSpec(tuple(s / np.linalg.norm(s)), "normal", 1361.0))
-
-
-CASES = {
-    "default": lambda spec: spec,
-    "partly out of view": partly_out_of_view,
-    "occluder across the frame": occluder_across_the_frame,
-    "sun glare": sun_in_view,
-}
 
 
 @pytest.mark.parametrize("case", list(CASES))
@@ -137,11 +100,6 @@ def test_without_a_denoiser_the_region_render_is_the_full_frame_byte_for_byte(ge
         assert (full.instance[:, 0] == 2).any() and (full.instance[:, -1] == 2).any()
     if case == "sun glare":
         assert full.camera.flare
-
-
-def rms_over_objects(a: np.ndarray, b: np.ndarray, instance: np.ndarray) -> float:
-    on = instance > 0
-    return float(np.sqrt(np.mean((a.astype(np.float64) - b.astype(np.float64))[on] ** 2)))
 
 
 def test_denoised_region_render_keeps_the_labels_and_the_presets_quality(generator):

@@ -18,7 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from scgen.render.conventions import CLIP_START_M
+from scgen.render.props import prop_mesh
 from scgen.scenes.geometry import project
+from scgen.scenes.spec import SceneSpec
 
 FULL_FRAME_ENV = "SCGEN_FULL_FRAME"  # set to 1: trace the whole frame (the benchmarks' old path), workers too
 
@@ -93,3 +95,12 @@ def covered_region(
     if x1 <= x0 or y1 <= y0:
         return full_frame(width, height)
     return Region(x0, y0, x1, y1, width, height)
+
+
+def scene_region(spec: SceneSpec, hull: np.ndarray, reach_px: float, margin_px: int) -> Region:
+    """covered_region of `spec`'s camera (the one rendered) around its target, given as `hull` (the
+    vertices of the model's convex hull, model frame), and its props' meshes."""
+    cam = spec.camera
+    target = hull @ spec.target.R_mat.T + spec.target.t_vec
+    objects = [target, *(np.asarray(prop_mesh(p).vertices) for p in spec.props)]
+    return covered_region(cam.K_mat, cam.width, cam.height, objects, reach_px, margin_px)

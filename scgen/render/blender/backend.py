@@ -24,8 +24,7 @@ from scgen.render.blender.env import import_bpy, select_device
 from scgen.render.blender.scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender.settings import FILTER_WIDTH_PX, preset
 from scgen.render.camera import record_image, render_camera
-from scgen.render.props import prop_mesh
-from scgen.render.region import Region, covered_region, full_frame, region_render
+from scgen.render.region import Region, full_frame, region_render, scene_region
 from scgen.render.sky.backgrounds import background_image
 from scgen.scenes.geometry import project
 from scgen.scenes.model import TargetModel
@@ -89,14 +88,9 @@ class BlenderBackend:
 
     def region(self, spec: SceneSpec) -> Region:
         """The part of `spec`'s frame Cycles traces: around the target's hull and the props' meshes."""
-        cam = spec.camera
         if not self.trace_region:
-            return full_frame(cam.width, cam.height)
-        target = self._hull @ spec.target.R_mat.T + spec.target.t_vec
-        objects = [target, *(np.asarray(prop_mesh(p).vertices) for p in spec.props)]
-        return covered_region(
-            cam.K_mat, cam.width, cam.height, objects, FILTER_WIDTH_PX / 2, DENOISE_MARGIN_PX
-        )
+            return full_frame(spec.camera.width, spec.camera.height)
+        return scene_region(spec, self._hull, FILTER_WIDTH_PX / 2, DENOISE_MARGIN_PX)
 
     def _ray_caster(self) -> MitsubaBackend:
         """The Mitsuba backend's exact geometric passes, made on first need (cameras with a lens)."""
