@@ -1,7 +1,10 @@
 """Mitsuba backend: the time per sample at two image sizes side by side, so the fixed part shows, with the
 kernels each sample launches and compiles; then, at 640x480, throughput, time outside the renderer, bytes
 per sample by file kind and the float16-vs-float32 xyz storage error. First (--profile) a 640x480 sample's
-seconds by stage.
+seconds by stage. Last (--region-n) the old path (the whole frame path-traced) beside the new (a window
+over the region the objects cover, scgen.render.mitsuba.window): one worker renders each sample in both,
+in turn (A B A B), at --region-size. The other parts run the default (the window; SCGEN_FULL_FRAME=1: the
+whole frame).
 
 Each size renders in a fresh worker process, as `scgen render` runs it (scgen.io.parent_watch.spawn_pool),
 with --threads renderer threads: one unless given, as a worker of `scgen render` renders
@@ -9,7 +12,7 @@ with --threads renderer threads: one unless given, as a worker of `scgen render`
 before they sleep, on cores the worker's own numpy work (backgrounds, the camera stage) then shares, and
 the images are not repeatable.
 Usage: python benchmarks/bench_mitsuba.py [--n 30] [--warmup 200] [--sizes 64x48,320x240] [--threads N]
-       [--full-n 30] [--profile 10] [--out DIR]
+       [--full-n 30] [--profile 10] [--region-n 24] [--region-size 640x480] [--out DIR]
 """
 
 from __future__ import annotations
@@ -104,6 +107,67 @@ def side_by_side(
         fixed = t[0] - per_px * pixels[0]
         print(f"  straight line through the medians: {1000 * fixed:.1f} ms fixed + {1e6 * per_px:.2f} ms per")
         print(f"  1000 pixels ({100 * fixed / t[0]:.0f} % of a {sizes[0][0]}x{sizes[0][1]} render is fixed)")
+
+
+MODES = {"full frame": False, "window": True}  # MitsubaBackend.trace_region: the old path, then the new
+
+
+def time_modes(size: tuple[int, int], n: int, quality: str, seed: int, warmup: int) -> dict[str, dict]:
+    """In a worker: samples warmup..warmup+n-1 of `seed` at `size`, each rendered and annotated once per
+    mode in turn after the samples before them in both modes (a warm-up: a new window size compiles its
+    kernels and records its render); per mode and sample the seconds, kernels compiled, renders recorded
+    and the share of the frame path-traced."""
+    import drjit as dr
+
+    model = load_target()
+    backend = create_backend("mitsuba", model, quality=quality)
+    generator = Generator(model, load_config(resolution=size), seed)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    runs: dict[str, dict[str, list[float]]] = {m: defaultdict(list) for m in MODES}
+    for i in range(warmup + n):
+        spec = generator.scene(i)
+        for mode, trace_region in MODES.items():
+            backend.trace_region = trace_region
+            dr.kernel_history()
+            recordings = backend.recordings
+            t0 = time.perf_counter()
+            buffers = backend.render(spec)
+            t1 = time.perf_counter()
+            annotate(spec, buffers)
+            if i < warmup:
+                continue
+            r = runs[mode]
+            r["render"].append(t1 - t0)
+            r["sample"].append(time.perf_counter() - t0)
+            r["compiled"].append(sum(1 for k in dr.kernel_history() if k.get("cache_hit") == 0))
+            r["recorded"].append(backend.recordings - recordings)
+            r["share"].append(backend.window.share)
+    return {m: dict(r) for m, r in runs.items()}
+
+
+def region_side_by_side(size: tuple[int, int], n: int, quality: str, seed: int, warmup: int) -> None:
+    """The full frame's per-sample figures beside the window's, one worker, A B A B."""
+    with spawn_pool(1) as pool:
+        runs = pool.submit(time_modes, size, n, quality, seed, warmup).result()
+    print(
+        f"\nMitsuba {size[0]}x{size[1]} ({quality}), seed {seed}: samples {warmup}-{warmup + n - 1} after "
+        f"{warmup} warm-up samples, one worker, each sample in both modes in turn (A B A B)"
+    )
+    print(f"  {'per sample':<32s}" + "".join(f"{m:>12s}" for m in MODES))
+    rows = [
+        ("render, median s", lambda r: np.median(r["render"])),
+        ("render, mean s", lambda r: np.mean(r["render"])),
+        ("render + annotate, median s", lambda r: np.median(r["sample"])),
+        ("pixels path-traced, median %", lambda r: 100 * np.median(r["share"])),
+        ("kernels compiled, mean", lambda r: np.mean(r["compiled"])),
+        ("renders recorded, %", lambda r: 100 * np.mean(r["recorded"])),
+    ]
+    for label, value in rows:
+        print(f"  {label:<32s}" + "".join(f"{value(runs[m]):12.3f}" for m in MODES))
+    full, window = (np.mean(runs[m]["sample"]) for m in MODES)
+    ratios = np.divide(runs["window"]["sample"], runs["full frame"]["sample"])
+    print(f"  window / full frame: {window / full:.3f} of the mean time per sample (median per-sample ratio "
+          f"{np.median(ratios):.3f})")  # fmt: skip
 
 
 def full_size(n: int, quality: str, out: Path) -> None:
@@ -216,6 +280,9 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--full-n", type=int, default=30, help="samples at 640x480 (0: skip)")
     ap.add_argument("--profile", type=int, default=10, help="640x480 samples profiled by stage (0: skip)")
+    ap.add_argument("--region-n", type=int, default=24, help="samples in both modes, side by side (0: skip)")
+    ap.add_argument("--region-warmup", type=int, default=8, help="samples in both modes before those timed")
+    ap.add_argument("--region-size", default="640x480")
     ap.add_argument("--quality", default="default")
     ap.add_argument("--threads", type=int, default=None, help="renderer threads per worker [one]")
     ap.add_argument("--out", type=Path, default=None)
@@ -230,6 +297,9 @@ def run(args: argparse.Namespace) -> None:
         side_by_side(sizes, args.n, args.quality, args.seed, args.threads, args.warmup)
     if args.full_n:
         full_size(args.full_n, args.quality, args.out or Path(tempfile.mkdtemp()) / "bench")
+    if args.region_n:
+        size = tuple(int(x) for x in args.region_size.split("x"))
+        region_side_by_side(size, args.region_n, args.quality, args.seed, args.region_warmup)
 
 
 if __name__ == "__main__":

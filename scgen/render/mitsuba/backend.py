@@ -10,6 +10,10 @@ material class (slots), and the lights take the sample's direction and irradianc
 replays a frozen recording (drjit.freeze) instead of tracing the path tracer through every live BSDF
 again (about 20 ms a sample at any image size); it records again only when the set of meshes, BSDFs or
 lights grows, a mesh outgrows its capacity, or the lights' bounding sphere changes.
+
+The path tracer renders only a window over the region the objects cover (scgen.render.region,
+mitsuba.window): the film is transparent and the sky is composited in numpy, so every pixel outside it
+renders zero. The label passes are cast through every pixel, as before; they do not change.
 """
 
 from __future__ import annotations
@@ -32,10 +36,12 @@ from scgen.render.mitsuba.materials import TargetFinishes, box_uv, build_bsdfs, 
 from scgen.render.mitsuba.memory import aligned
 from scgen.render.mitsuba.ray_cull import may_hit
 from scgen.render.mitsuba.slots import MeshSlot, build_mesh, registry_id
+from scgen.render.mitsuba.window import REACH_PX, film_window
 from scgen.render.props import prop_mesh
+from scgen.render.region import Region, full_frame, region_render, scene_region
 from scgen.render.sky.backgrounds import background_image
 from scgen.scenes.model import TargetModel
-from scgen.scenes.spec import SceneSpec
+from scgen.scenes.spec import CameraSpec, SceneSpec
 
 QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
 GUARD_M = 1e4  # half the span of the guard triangle (see MitsubaBackend.__init__)
@@ -69,8 +75,16 @@ class MitsubaBackend:
 
     name = "mitsuba"
 
-    def __init__(self, model: TargetModel, quality: str = "default", threads: int = MITSUBA_THREADS) -> None:
-        """`threads`: Dr.Jit's CPU threads, for the whole process (above MITSUBA_THREADS, see there)."""
+    def __init__(
+        self,
+        model: TargetModel,
+        quality: str = "default",
+        threads: int = MITSUBA_THREADS,
+        region: bool | None = None,
+    ) -> None:
+        """`threads`: Dr.Jit's CPU threads, for the whole process (above MITSUBA_THREADS, see there);
+        `region`: path-trace only a window over the pixels the objects may cover (mitsuba.window), else
+        the whole frame (None: as region_render() says)."""
         self.variant = select_variant()
         dr.set_thread_count(threads)
         self.model = model
@@ -83,6 +97,9 @@ class MitsubaBackend:
         self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
         self._finishes = TargetFinishes(FINISHES_PER_CLASS)
         self._reach = 1.01 * float(np.linalg.norm(model.mesh.vertices, axis=1).max())  # target's radius
+        self._hull = np.asarray(model.mesh.convex_hull.vertices, np.float64)
+        self.trace_region = region_render() if region is None else region
+        self.window = full_frame(1, 1)  # the last render's film window, for tests and benchmarks
         # the target's slots, one per BSDF it is drawn with (named as TargetFinishes names them, or by the
         # nominal class), each large enough for the largest part class; the props', one per material class
         self._target_capacity = max(
@@ -102,10 +119,14 @@ class MitsubaBackend:
         # the path tracer's scenes, by (camera, with the Earth's light), with their lights
         self._scenes: dict[tuple, tuple[mi.Scene, SceneLights]] = {}
         self._cast_scenes: dict[str, mi.Scene] = {}  # ray-cast scenes kept likewise (see _cast_scene)
+        self._window_sensors: dict[CameraSpec, mi.Sensor] = {}  # one per render camera (_window_sensor)
         # this backend's own recordings: they hold the addresses of its meshes' buffers, which another
         # backend's meshes in the same layout would not have
         self._frozen_render = dr.freeze(_render_scene, limit=RECORDINGS_KEPT, warn_after=2**31 - 1)
         self._frozen_intersect = dr.freeze(intersect_from_origin, limit=RECORDINGS_KEPT, warn_after=2**31 - 1)
+        # the window renders' (trace_region), one frozen function per film size (each compiled with its
+        # own constants): in one function, a call with another sensor than the last would record again
+        self._frozen_windows: dict[tuple[int, int], Any] = {}
 
     def close(self) -> None:
         pass
@@ -113,7 +134,9 @@ class MitsubaBackend:
     @property
     def recordings(self) -> int:
         """How many renders traced the path tracer and recorded it; every other render replayed one."""
-        return self._frozen_render.n_recordings if dr.is_jit_v(mi.Float) else 0
+        if not dr.is_jit_v(mi.Float):
+            return 0
+        return sum(f.n_recordings for f in (self._frozen_render, *self._frozen_windows.values()))
 
     def _fill(self, spec: SceneSpec, shaded: bool = True) -> SampleMeshes:
         """Put the sample's target and props, in the camera frame, into their slots. `shaded`: the target
@@ -279,10 +302,39 @@ class MitsubaBackend:
 
     def _shade(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> np.ndarray:
         """The linear composite over the background, on the render camera (scgen.render.camera.lens)."""
-        img = np.asarray(self._render(spec, scene, layout), dtype=np.float32)
+        shown = replace(spec, camera=render_camera(spec.camera))
+        self.window = film_window(self.region(shown))
+        img = np.asarray(self._render(spec, scene, layout, self.window), dtype=np.float32)
+        img = self.window.paste(img, 0.0)  # a pixel outside renders (0, 0, 0, 0): it meets nothing
         fg, alpha = img[..., :3], img[..., 3:4]
-        background = background_image(replace(spec, camera=render_camera(spec.camera)))
-        return fg + (1.0 - np.clip(alpha, 0, 1)) * background
+        return fg + (1.0 - np.clip(alpha, 0, 1)) * background_image(shown)
+
+    def region(self, spec: SceneSpec) -> Region:
+        """The pixels of `spec`'s frame (its render camera's) whose value the objects may set."""
+        if not self.trace_region:
+            return full_frame(spec.camera.width, spec.camera.height)
+        return scene_region(spec, self._hull, REACH_PX, 0)
+
+    def _window_sensor(self, spec: SceneSpec, window: Region) -> mi.Sensor:
+        """The window's camera: one sensor kept per render camera and set to the window, its film's size
+        and its field of view and principal point (opaque values, not a recording's constants). One, not
+        one per window size: with a sensor per size the renders recorded again more often."""
+        camera = render_camera(spec.camera)
+        d = _sensor(camera, self.spp, window)
+        if not dr.is_jit_v(mi.Float):  # scalar_rgb: no recording to keep, a new sensor
+            return mi.load_dict(d)
+        if camera not in self._window_sensors:
+            self._window_sensors[camera] = mi.load_dict(d)
+        params = mi.traverse(self._window_sensors[camera])
+        size = mi.ScalarVector2u(d["film"]["width"], d["film"]["height"])
+        params["film.size"] = params["film.crop_size"] = size
+        params["x_fov"] = dr.opaque(mi.Float, d["fov"])
+        for axis in "xy":
+            params[f"principal_point_offset_{axis}"] = dr.opaque(
+                mi.Float, d[f"principal_point_offset_{axis}"]
+            )
+        params.update()
+        return self._window_sensors[camera]
 
     def _intersect(self, scene: mi.Scene, d: mi.Vector3f) -> tuple:
         """intersect_from_origin, replayed from a frozen recording: keyed by the meshes' capacities (their
@@ -296,41 +348,55 @@ class MitsubaBackend:
     def _capacities(self) -> tuple[int, ...]:
         return tuple(s.capacity for s in self._slots())
 
-    def _render(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> mi.TensorXf:
-        """mi.render of `scene`, replayed from a frozen recording in a JIT variant. Its inputs name every
-        live object the recorded kernels call into (the other scenes' lights too) and, as plain values,
-        what the recording bakes in: the lights' bounding sphere and the meshes' capacities."""
+    def _render(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes, window: Region) -> mi.TensorXf:
+        """mi.render of `window` of `scene`'s frame, replayed from a frozen recording in a JIT variant. Its
+        inputs name every live object the recorded kernels call into (the other scenes' lights too) and,
+        as plain values, what the recording bakes in: the lights' bounding sphere, the meshes' capacities
+        and the film's size."""
+        sensor = self._window_sensor(spec, window) if self.trace_region else 0  # 0: the scene's own
         if not dr.is_jit_v(mi.Float):
-            return mi.render(scene, seed=render_seed(spec))
+            return mi.render(scene, sensor=sensor, seed=render_seed(spec))
         others = [e for other, _ in self._scenes.values() if other is not scene for e in other.emitters()]
         seed = dr.opaque(mi.UInt32, render_seed(spec))
-        return self._frozen_render(scene, seed, light_radius(layout.extent), self._capacities(), others)
+        radius, capacities = light_radius(layout.extent), self._capacities()
+        if not self.trace_region:
+            return self._frozen_render(scene, seed, radius, capacities, others)
+        film = (window.x1 - window.x0, window.y1 - window.y0)
+        if film not in self._frozen_windows:  # every input opaque: a size's few renders learn nothing
+            self._frozen_windows[film] = dr.freeze(
+                _render_scene, limit=RECORDINGS_KEPT, warn_after=2**31 - 1, auto_opaque=False
+            )
+        return self._frozen_windows[film](scene, seed, radius, capacities, others, sensor=sensor)
 
 
 def _render_scene(
-    scene: mi.Scene, seed: mi.UInt32, radius: float, capacities: tuple, others: list
+    scene: mi.Scene, seed: mi.UInt32, radius: float, capacities: tuple, others: list, sensor: Any = 0
 ) -> mi.TensorXf:
-    """mi.render, to be frozen: recorded once per distinct set of inputs, replayed after (see
-    MitsubaBackend._render)."""
-    return mi.render(scene, seed=seed)
+    """mi.render through `sensor` (the scene's own, or another), to be frozen: recorded once per distinct
+    set of inputs, replayed after (see MitsubaBackend._render)."""
+    return mi.render(scene, sensor=sensor, seed=seed)
 
 
-def _sensor(cam, spp: int) -> dict:
-    """The render camera as Mitsuba's perspective sensor, with its film and sampler."""
+def _sensor(cam, spp: int, window: Region | None = None) -> dict:
+    """The render camera as Mitsuba's perspective sensor, with its film and sampler; with `window`, a
+    camera of the window's pixels of the frame (the same rays through them)."""
     K = cam.K_mat
+    window = window or full_frame(cam.width, cam.height)
+    width, height = window.x1 - window.x0, window.y1 - window.y0
+    cx, cy = K[0, 2] - window.x0, K[1, 2] - window.y0
     return {
         "type": "perspective",
-        "fov": float(np.degrees(2 * np.arctan(cam.width / (2 * K[0, 0])))),
+        "fov": float(np.degrees(2 * np.arctan(width / (2 * K[0, 0])))),
         "fov_axis": "x",
-        "principal_point_offset_x": ((cam.width - 1) / 2 - K[0, 2]) / cam.width,
-        "principal_point_offset_y": ((cam.height - 1) / 2 - K[1, 2]) / cam.height,
+        "principal_point_offset_x": ((width - 1) / 2 - cx) / width,
+        "principal_point_offset_y": ((height - 1) / 2 - cy) / height,
         "near_clip": CLIP_START_M,
         "far_clip": CLIP_END_M,
         "to_world": mi.ScalarTransform4f().scale([-1, -1, 1]),
         "film": {
             "type": "hdrfilm",
-            "width": cam.width,
-            "height": cam.height,
+            "width": width,
+            "height": height,
             "pixel_format": "rgba",
             "rfilter": {"type": "gaussian"},
         },
