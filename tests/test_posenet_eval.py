@@ -4,14 +4,11 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-import torch
 from click.testing import CliRunner
-from float_bounds import pose_checkpoint_rel
+from float_bounds import gram_schmidt_gain, pose_checkpoint_rel, rotation_outputs
 from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
@@ -27,35 +24,6 @@ def rotation_error_bound_deg(re_deg: float, rel: float) -> float:
     so the angle by d / sin(angle), or sqrt(2 d) where arccos is steep near 0 and 180 deg."""
     d = 3 * math.sqrt(3) * rel / 2
     return math.degrees(max(min(d / max(math.sin(math.radians(re_deg)), 1e-300), math.pi), math.sqrt(2 * d)))
-
-
-@contextmanager
-def rotation_outputs() -> Iterator[list[torch.Tensor]]:
-    """The 6D rotation output (B x 6) of every pose-network forward run inside, in order: what each R is
-    the Gram-Schmidt of (posenet.geometry.rot6d_to_mat)."""
-    seen: list[torch.Tensor] = []
-
-    def keep(_module: torch.nn.Module, _args: object, out: object) -> None:
-        if isinstance(out, dict) and "rot6d" in out:
-            seen.append(out["rot6d"].detach().clone())
-
-    handle = torch.nn.modules.module.register_module_forward_hook(keep)
-    try:
-        yield seen
-    finally:
-        handle.remove()
-
-
-def gram_schmidt_gain(d6: torch.Tensor) -> float:
-    """How many times the 6D output's rounding (rel of its largest entry s) an entry of R = rot6d_to_mat(d6)
-    can move: x = a1 / |a1| by sqrt(3) s / |a1|, z = x cross a2 / |x cross a2| by sqrt(3) s (1 + |a2| / |a1|)
-    / |x cross a2|, y = z cross x by the sum of both; an entry by at most its column's norm (which the
-    allocentric-to-egocentric rotation keeps). A 6D output whose a2 lies near a1 is ill-conditioned: the
-    tiny checkpoint's gains reach ~16."""
-    a1, a2 = d6[:3].double(), d6[3:].double()
-    s, n1 = float(d6.abs().max()), float(a1.norm())
-    across = float(torch.linalg.cross(a1 / n1, a2).norm())
-    return math.sqrt(3) * s * (1 / n1 + (1 + float(a2.norm()) / n1) / across)
 
 
 def assert_records_agree(a: dict, b: dict, diameter: float, rel: float, gain: float) -> None:
