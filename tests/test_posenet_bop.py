@@ -56,6 +56,8 @@ def posenet(*args: object) -> tuple[int, str]:
 
 
 def test_models_info_symmetries_become_metric_transforms_with_the_identity_first() -> None:
+    """The allclose/isclose checks: float64 mm / 1000 and unit rotations built from cos and sin, a few u64
+    (1e-16) each, far inside numpy's defaults (rtol 1e-5, atol 1e-8), where a wrong transform is O(1)."""
     info = {"diameter": 100.0, "symmetries_discrete": [FLIP_Z_MM]}
     T = bop.symmetry_transforms(info)
     assert T.shape == (2, 4, 4) and np.array_equal(T[0], np.eye(4))
@@ -82,6 +84,8 @@ def test_models_info_symmetries_become_metric_transforms_with_the_identity_first
 
 
 def test_pm_loss_is_the_minimum_over_the_symmetric_poses_of_the_gt() -> None:
+    """float64 throughout: a symmetric pose's loss is a few u64 x |p| (<= 0.87), under 1e-15, hence 1e-12; the
+    same minimum taken two ways agrees to a few u64 relative, inside rel=1e-12."""
     pts = torch.rand(400, 3, generator=torch.Generator().manual_seed(1), dtype=torch.float64) - 0.5
     R_gt, t_gt = (
         random_rotations(4, seed=2),
@@ -129,9 +133,12 @@ def test_a_flip_scores_zero_for_an_object_declared_symmetric_only() -> None:
     sym = sample_errors(R_pred, t_pred, R_gt, t_gt, pts, pts, flip)
     asym = sample_errors(R_pred, t_pred, R_gt, t_gt, pts, pts, flip[:1])
     for errs in (sym, asym):
+        # arccos near -1 turns a few u64 into sqrt(8 u64) rad = 1.7e-6 deg, inside allclose's 1e-5 x 180
         assert torch.allclose(errs["re_deg"], torch.full((3,), 180.0, dtype=torch.float64))
-        assert float(errs["adds_m"].max()) < 1e-6  # ADD-S never asks: the point sets coincide (cdist: ~1e-8)
+        # ADD-S never asks: the point sets coincide (cdist's |a|^2 + |b|^2 - 2 a.b: sqrt(8 u64) |a| = 9e-8)
+        assert float(errs["adds_m"].max()) < 1e-6
         assert float(errs["add_m"].min()) > 0.01
+    # arccos near 1: sqrt(8 u64) rad = 1.7e-6 deg; MSSD a few u64 x 3 m, 1e-15
     assert float(sym["re_sym_deg"].max()) < 1e-5 and float(sym["mssd_m"].max()) < 1e-12
     assert torch.equal(asym["re_sym_deg"], asym["re_deg"])
     moved = (pts @ flip[1, :3, :3].T + flip[1, :3, 3] - pts).norm(dim=-1).max()  # rigid: frame-independent
@@ -188,7 +195,7 @@ def test_bop_csv_times_are_per_image_and_poses_round_trip(tmp_path: Path) -> Non
     for r, row in zip(records, rows, strict=True):
         assert (row["scene_id"], row["im_id"], row["obj_id"]) == (r["scene_id"], r["im_id"], 2)
         assert row["score"] == 1.0 and row["R"] == r["R"] and row["time"] == r["time_s"]
-        assert row["t_mm"] == pytest.approx([1000 * v for v in r["t"]], rel=1e-12)
+        assert row["t_mm"] == pytest.approx([1000 * v for v in r["t"]], rel=1e-12)  # x 1000: one u64 rounding
 
 
 # --- --obj-id on a dataset with two objects ---------------------------------------------------------------
@@ -274,6 +281,7 @@ def test_obj_id_trains_evaluates_and_boxes_the_chosen_object(two_objects: Path, 
     times: dict[tuple[int, int], set[float]] = {}
     for r, row in zip(records, rows, strict=True):
         assert (row["scene_id"], row["im_id"], row["obj_id"]) == (r["scene_id"], r["im_id"], 2)
+        # the CSV holds R as given and t x 1000 (one float64 rounding, 1e-16 relative)
         assert row["R"] == r["R"] and row["t_mm"] == pytest.approx([1000 * v for v in r["t"]], rel=1e-12)
         times.setdefault((row["scene_id"], row["im_id"]), set()).add(row["time"])
     assert all(len(t) == 1 and next(iter(t)) > 0 for t in times.values())  # one time per image
