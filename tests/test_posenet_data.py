@@ -64,12 +64,13 @@ def test_region_labels_are_nearest_fps_centres(dataset_dir: Path) -> None:
     centres = ds.obj.fps_points
     assert centres.shape == (mc.num_regions, 3)
     far = np.linalg.norm(ds.obj.vertices - ds.obj.vertices.mean(0), axis=1).max()
+    # the same vertex, its distance summed in another order: a few u64, inside isclose's rtol 1e-5
     assert np.isclose(np.linalg.norm(centres[0] - ds.obj.vertices.mean(0)), far)
     pts = np.array([[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]])
     labels = region_labels(pts, np.array([[1, 0]]), np.array([[5.0, 5, 5], [0.1, 0, 0]]))
     assert labels.tolist() == [[2, 0]]
     line = np.linspace(0, 1, 11)[:, None] * np.array([[1.0, 0, 0]])
-    assert np.allclose(sorted(farthest_point_sampling(line, 3)[:, 0]), [0.0, 0.5, 1.0])
+    assert np.allclose(sorted(farthest_point_sampling(line, 3)[:, 0]), [0.0, 0.5, 1.0])  # linspace: ~1 u64
 
 
 def test_augmentation_is_a_function_of_seed_epoch_and_index(dataset_dir: Path) -> None:
@@ -134,7 +135,8 @@ def test_surface_points_lie_on_the_mesh_and_are_fixed(dataset_dir: Path) -> None
     mesh = trimesh.load(str(dataset_dir / "models" / "obj_000001.ply"), force="mesh", process=False)
     # in the file's millimetres: trimesh's closest-point tolerances misjudge small triangles in metres
     _, distance_mm, _ = trimesh.proximity.closest_point(mesh, obj.pm_points * 1000.0)
-    assert distance_mm.max() < 1e-3  # 1e-6 m
+    # 1e-6 m: float64 samples on the file's triangles, scaled to metres and back: a few u64 x 100 mm, 1e-14 mm
+    assert distance_mm.max() < 1e-3
 
 
 def test_surface_points_are_uniform_over_area_not_vertices(tmp_path: Path) -> None:

@@ -60,6 +60,8 @@ def test_schedule_warms_up_stays_flat_then_anneals_to_zero() -> None:
     f = [lr_factor(i, 100, o) for i in range(101)]
     assert f[0] == pytest.approx(0.001) and f[5] == pytest.approx(0.5005)
     assert f[10] == f[50] == f[72] == 1.0
+    # float64: a few u64 from the formulas' values, inside approx's rel 1e-6; at the end cos(pi) is -1 to
+    # a u64, so the factor 0.5 (1 + cos) is 0 within 1e-16
     assert f[86] == pytest.approx(0.5) and f[100] == pytest.approx(0.0, abs=1e-12)
     assert all(a >= b for a, b in zip(f[72:], f[73:], strict=False))
 
