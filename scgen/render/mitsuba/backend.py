@@ -304,7 +304,7 @@ class MitsubaBackend:
         """The linear composite over the background, on the render camera (scgen.render.camera.lens)."""
         shown = replace(spec, camera=render_camera(spec.camera))
         self.window = film_window(self.region(shown))
-        img = np.asarray(self._render(spec, scene, layout, self.window), dtype=np.float32)
+        img = np.asarray(self._render(shown, scene, layout, self.window), dtype=np.float32)
         img = self.window.paste(img, 0.0)  # a pixel outside renders (0, 0, 0, 0): it meets nothing
         fg, alpha = img[..., :3], img[..., 3:4]
         return fg + (1.0 - np.clip(alpha, 0, 1)) * background_image(shown)
@@ -315,11 +315,10 @@ class MitsubaBackend:
             return full_frame(spec.camera.width, spec.camera.height)
         return scene_region(spec, self._hull, REACH_PX, 0)
 
-    def _window_sensor(self, spec: SceneSpec, window: Region) -> mi.Sensor:
+    def _window_sensor(self, camera: CameraSpec, window: Region) -> mi.Sensor:
         """The window's camera: one sensor kept per render camera and set to the window, its film's size
         and its field of view and principal point (opaque values, not a recording's constants). One, not
         one per window size: with a sensor per size the renders recorded again more often."""
-        camera = render_camera(spec.camera)
         d = _sensor(camera, self.spp, window)
         if not dr.is_jit_v(mi.Float):  # scalar_rgb: no recording to keep, a new sensor
             return mi.load_dict(d)
@@ -349,11 +348,11 @@ class MitsubaBackend:
         return tuple(s.capacity for s in self._slots())
 
     def _render(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes, window: Region) -> mi.TensorXf:
-        """mi.render of `window` of `scene`'s frame, replayed from a frozen recording in a JIT variant. Its
-        inputs name every live object the recorded kernels call into (the other scenes' lights too) and,
-        as plain values, what the recording bakes in: the lights' bounding sphere, the meshes' capacities
-        and the film's size."""
-        sensor = self._window_sensor(spec, window) if self.trace_region else 0  # 0: the scene's own
+        """mi.render of `window` of `scene`'s frame (`spec` on its render camera), replayed from a frozen
+        recording in a JIT variant. Its inputs name every live object the recorded kernels call into (the
+        other scenes' lights too) and, as plain values, what the recording bakes in: the lights' bounding
+        sphere, the meshes' capacities and the film's size."""
+        sensor = self._window_sensor(spec.camera, window) if self.trace_region else 0  # 0: the scene's own
         if not dr.is_jit_v(mi.Float):
             return mi.render(scene, sensor=sensor, seed=render_seed(spec))
         others = [e for other, _ in self._scenes.values() if other is not scene for e in other.emitters()]
