@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import shutil
 from pathlib import Path
@@ -172,15 +173,18 @@ def test_evaluation_items_have_no_targets_and_no_jitter(dataset_dir: Path) -> No
 
 def test_sampler_shards_are_disjoint_deterministic_and_resumable() -> None:
     a, b = EpochSampler(50, 4, world=2, rank=0, seed=1), EpochSampler(50, 4, world=2, rank=1, seed=1)
-    assert a.steps_per_epoch == 6 and len(a) == 24
-    ia, ib = [i for _, i in a], [i for _, i in b]
-    assert not set(ia) & set(ib) and len(set(ia) | set(ib)) == 48
-    assert ia == [i for _, i in EpochSampler(50, 4, world=2, rank=0, seed=1)]
-    a.set_epoch(1)
-    epoch1 = list(a)
-    assert epoch1[0][0] == 1 and [i for _, i in epoch1] != ia
+    assert a.steps_per_epoch == 6
+    ia, ib = [i for _, i in a.epoch_indices(0)], [i for _, i in b.epoch_indices(0)]
+    assert len(ia) == len(ib) == 24 and not set(ia) & set(ib) and len(set(ia) | set(ib)) == 48
+    assert ia == [i for _, i in EpochSampler(50, 4, world=2, rank=0, seed=1).epoch_indices(0)]
+    epoch1 = a.epoch_indices(1)
+    assert {e for e, _ in epoch1} == {1} and [i for _, i in epoch1] != ia
+    assert a.epoch_indices(1, skip_batches=2) == epoch1[8:]
+    # one stream over the epochs' ends, from where set_epoch starts it: a resumed run's batches
+    assert list(itertools.islice(a, 24 + 24)) == a.epoch_indices(0) + epoch1
     a.set_epoch(1, skip_batches=2)
-    assert list(a) == epoch1[8:] and len(a) == 16
+    assert list(itertools.islice(a, 16 + 24)) == epoch1[8:] + a.epoch_indices(2)
+    assert list(EpochSampler(3, 4)) == []  # fewer samples than a batch: no batch, and no endless wait
 
 
 def test_boxes_command_writes_bop_detections_that_evaluation_uses(dataset_dir: Path, tmp_path: Path) -> None:

@@ -94,22 +94,16 @@ def run_arm(
         num_workers=cfg.data.workers,
         worker_init_fn=worker_init,
     )
-    coord, const, rows, step, epoch = [], [], [], 0, 0
-    while step < steps:
-        sampler.set_epoch(epoch)
-        epoch += 1
-        for batch in loader:
-            batch = ARMS[arm](batch)
-            const.append(constant_loss(batch))
-            coord.append(float(train_step(model, optimizer, batch, points, cfg)[1]))
-            scheduler.step()
-            step += 1
-            if step % report_every == 0:
-                rows.append(
-                    (step, float(np.mean(coord[-report_every:])), float(np.mean(const[-report_every:])))
-                )
-            if step == steps:
-                break
+    coord, const, rows = [], [], []
+    for step, batch in enumerate(loader, start=1):  # the sampler's stream runs over the epochs' ends
+        batch = ARMS[arm](batch)
+        const.append(constant_loss(batch))
+        coord.append(float(train_step(model, optimizer, batch, points, cfg)[1]))
+        scheduler.step()
+        if step % report_every == 0:
+            rows.append((step, float(np.mean(coord[-report_every:])), float(np.mean(const[-report_every:]))))
+        if step == steps:
+            break
     return rows
 
 

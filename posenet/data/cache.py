@@ -344,9 +344,6 @@ class BatchLoader:
             moved = {k: v.to(self.device, non_blocking=True) for k, v in raw.items()}
             yield batch_augment.augment_batch(moved, self.pool, self.extent, self.centres)
 
-    def __len__(self) -> int:
-        return len(self.loader)
-
 
 def cache_loader(
     root: Path, dataset: PoseDataset, sampler: EpochSampler, loader_args: dict, device: torch.device

@@ -311,17 +311,19 @@ class DetectionDataset(Dataset):
     `masks` ((1, H, W) float 0/1, the union of the instances' whole-object masks) for a mask network.
 
     With `train`, each image is augmented (copy-paste, zoom, mirror, brightness/contrast) from a generator
-    seeded by (seed, epoch, index): the same run sees the same images, whatever the loader processes. The
-    mask travels through the geometric augmentations as a 4th channel of the image.
+    seeded by (seed, epoch, index), the index being an (epoch, index) pair from EpochSampler: the same run
+    sees the same images, whatever the loader processes. The mask travels through the geometric
+    augmentations as a 4th channel of the image.
     """
 
     def __init__(self, images: list[list[Instance]], cfg: DetectorConfig, train: bool, seed: int = 0) -> None:
-        self.images, self.cfg, self.train, self.seed, self.epoch = images, cfg, train, seed, 0
+        self.images, self.cfg, self.train, self.seed = images, cfg, train, seed
 
     def __len__(self) -> int:
         return len(self.images)
 
-    def __getitem__(self, index: int) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    def __getitem__(self, index: int | tuple[int, int]) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        epoch, index = index if isinstance(index, tuple) else (0, index)  # EpochSampler's (epoch, index)
         insts = self.images[index]
         img = _read_rgb(insts[0].rgb)
         boxes = target_boxes(insts)
@@ -331,7 +333,7 @@ class DetectionDataset(Dataset):
             union = np.logical_or.reduce(shown) if shown else np.zeros(img.shape[:2], bool)
             img = np.dstack([img, union.astype(np.float32)])
         if self.train:
-            rng = np.random.default_rng([self.seed, self.epoch, index])
+            rng = np.random.default_rng([self.seed, epoch, index])
             c = self.cfg
             if rng.random() < c.paste_prob:
                 donor = self.images[int(rng.integers(len(self.images)))]

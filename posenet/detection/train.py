@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import shutil
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +22,7 @@ from torch.utils.data import DataLoader
 from torchvision.models.detection import FCOS
 
 from posenet.checkpoint import load_checkpoint, save_checkpoint
+from posenet.data import EpochSampler
 from posenet.data.layout import split_scenes
 from posenet.detection.detect import box_metrics, detect
 from posenet.detection.detector import (
@@ -103,15 +105,12 @@ def _train(
     atomic_write_text(out / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     log = RunLog(out, step, None if budget else stop, o.log_every)
     try:
+        stream = _batches(train_set, step, per_epoch, cfg)
         while step < stop:
-            epoch, skip = divmod(step, per_epoch)
-            steps = (step, stop)
-            step, stop = _epoch(
-                model, optimizer, scheduler, train_set, epoch, skip, steps, cfg, device, log, budget
-            )
-            if step >= stop or (epoch + 1) % o.ckpt_every == 0:
-                schedule = budget.total if budget else total
-                best = _save(out, model, optimizer, scheduler, cfg, (step, schedule), best, val, device, log)
+            period = (step, stop, per_epoch)
+            step, stop = _steps(model, optimizer, scheduler, stream, period, cfg, device, log, budget)
+            schedule = budget.total if budget else total
+            best = _save(out, model, optimizer, scheduler, cfg, (step, schedule), best, val, device, log)
     finally:
         log.close()
     return out / LAST
@@ -123,40 +122,46 @@ def _val_images(data: Path, obj_id: int) -> list | None:
     return (image_groups(data, "val", obj_id) or None) if split_scenes(data, "val") else None
 
 
-def _epoch(
+def _batches(dataset: DetectionDataset, step: int, per_epoch: int, cfg: DetectorConfig) -> Iterator:
+    """The shuffled batches from `step` on, epoch after epoch (a fixed permutation per (seed, epoch),
+    posenet.data.EpochSampler), read by persistent loader processes that read ahead across the epochs'
+    ends."""
+    o = cfg.optim
+    sampler = EpochSampler(len(dataset), o.batch_size, seed=o.seed)
+    sampler.set_epoch(*divmod(step, per_epoch))
+    if cfg.workers > 0:
+        before_loader_fork()
+    loader = DataLoader(
+        dataset, batch_size=o.batch_size, sampler=sampler, num_workers=cfg.workers, collate_fn=collate,
+        worker_init_fn=worker_init, persistent_workers=cfg.workers > 0,
+    )  # fmt: skip
+    return iter(loader)
+
+
+def _steps(
     model: FCOS,
     optimizer: torch.optim.Optimizer,
     scheduler: torch.optim.lr_scheduler.LambdaLR,
-    dataset: DetectionDataset,
-    epoch: int,
-    skip: int,
-    steps: tuple[int, int],
+    stream: Iterator,
+    period: tuple[int, int, int],
     cfg: DetectorConfig,
     device: torch.device,
     log: RunLog,
     budget: TimeBudget | None,
 ) -> tuple[int, int]:
-    """The epoch's shuffled batches (a fixed permutation per (seed, epoch)) from batch `skip` up to the stop
-    step, one optimisation step each; returns the step reached and the stop step (a time budget moves it
-    after every step)."""
-    o = cfg.optim
-    step, stop = steps
-    dataset.epoch = epoch
-    order = torch.randperm(len(dataset), generator=torch.Generator().manual_seed(o.seed * 100003 + epoch))
-    batches = order[: len(order) // o.batch_size * o.batch_size].view(-1, o.batch_size)[skip:]
-    if cfg.workers > 0:
-        before_loader_fork()
-    loader = DataLoader(
-        dataset, batch_sampler=batches.tolist(), num_workers=cfg.workers, collate_fn=collate,
-        worker_init_fn=worker_init,
-    )  # fmt: skip
+    """One optimisation step per batch of `stream` from `period`'s (step, stop step, steps per epoch) up to
+    the next checkpoint (every ckpt_every epochs) or the stop step; returns the step reached and the stop
+    step (a time budget moves it after every step)."""
+    step, stop, per_epoch = period
+    save_every = cfg.optim.ckpt_every * per_epoch
     model.train()
     tic = time.perf_counter()
-    for images, targets in loader:
+    for images, targets in stream:
         wait = time.perf_counter() - tic  # the host idle for the loader since the last step
         lr = optimizer.param_groups[0]["lr"]
         terms = detector_step(model, optimizer, images, targets, device)
         scheduler.step()
+        epoch = step // per_epoch
         step += 1
         toc = time.perf_counter()
         loss = sum(terms.values())
@@ -165,7 +170,7 @@ def _epoch(
         tic = toc
         if budget is not None:
             stop = _follow_budget(budget, step, toc, log)
-        if step >= stop:
+        if step >= stop or step % save_every == 0:
             break
     return step, stop
 
