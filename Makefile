@@ -21,14 +21,19 @@ demo: install
 	$(BIN)/scgen render --n 8 --out demo_out --seed 0
 	$(BIN)/scgen stats demo_out
 
+# pytest-xdist processes for the suite: whole modules each (their module fixtures stay in one process), in
+# collection order (tests/conftest.py puts the longest first). OpenMP threads wait passively: torch's spin
+# at the end of every parallel region, which on 2 cores takes the other process's core (two processes
+# without it: user + sys 4,875 s against 2,972 s serially, and slower than one process)
+WORKERS ?= 2
 # the second kernel set: torch's ATen vector code, oneDNN and NumPy's OpenBLAS held to older
 # instruction sets, so that a float bound tuned to this CPU's kernels fails here first (docs/install.md)
 KERNELS2 ?= ATEN_CPU_CAPABILITY=default ONEDNN_MAX_CPU_ISA=SSE41 OPENBLAS_CORETYPE=Prescott
 
 test: install
 	$(BIN)/ruff check .
-	@echo "the suite: ~780 tests, ~40 min on 2 cores (38 min on 2026-11-28; real renders and training runs); a dot per test"
-	$(BIN)/pytest -q
+	@echo "the suite: ~790 tests, ~40 min on 2 cores (38 min on 2026-11-28; real renders and training runs); a dot per test"
+	env OMP_WAIT_POLICY=PASSIVE $(BIN)/pytest -q -n $(WORKERS) --dist loadfile --no-loadscope-reorder
 	@echo "the numeric tests (-m numeric) again under the second kernel set: $(KERNELS2)"
 	env $(KERNELS2) $(BIN)/pytest -q -m numeric
 

@@ -35,8 +35,6 @@ from posenet.evaluation.evaluate import by_factor, evaluate
 from posenet.evaluation.metrics import headline_add
 from scgen.cli import main as scgen_main
 
-# the cpu preset as a user gets it, on one thread (the machine is shared; same losses every run)
-DETECTOR = "preset: cpu\noptim: {threads: 1}\n"
 MASK = "mask-timm"
 
 
@@ -53,9 +51,9 @@ def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def detector_run(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The cpu preset as a user gets it (its pinned thread count gives the same losses every run)."""
     root = tmp_path_factory.mktemp("detector")
-    (root / "cpu.yaml").write_text(DETECTOR)
-    _invoke("train-detector", "--data", dataset_dir, "--out", root / "run", "--config", root / "cpu.yaml")
+    _invoke("train-detector", "--data", dataset_dir, "--out", root / "run", "--config", "cpu")
     return root / "run"
 
 
