@@ -38,13 +38,13 @@ from posenet.training.budget import TimeBudget, run_budget
 from posenet.training.train import (
     LAST,
     RunLog,
-    before_loader_fork,
     check_run_folder,
+    checkpoint_due,
+    loader_processes,
     make_optimizer,
     memory_format,
     pin_cpu_threads,
     stop_step,
-    worker_init,
 )
 from scgen.io import ScgenError, atomic_write_text, first_missing
 
@@ -129,12 +129,9 @@ def _batches(dataset: DetectionDataset, step: int, per_epoch: int, cfg: Detector
     o = cfg.optim
     sampler = EpochSampler(len(dataset), o.batch_size, seed=o.seed)
     sampler.set_epoch(*divmod(step, per_epoch))
-    if cfg.workers > 0:
-        before_loader_fork()
     loader = DataLoader(
-        dataset, batch_size=o.batch_size, sampler=sampler, num_workers=cfg.workers, collate_fn=collate,
-        worker_init_fn=worker_init, persistent_workers=cfg.workers > 0,
-    )  # fmt: skip
+        dataset, batch_size=o.batch_size, sampler=sampler, collate_fn=collate, **loader_processes(cfg.workers)
+    )
     return iter(loader)
 
 
@@ -153,7 +150,6 @@ def _steps(
     the next checkpoint (every ckpt_every epochs) or the stop step; returns the step reached and the stop
     step (a time budget moves it after every step)."""
     step, stop, per_epoch = period
-    save_every = cfg.optim.ckpt_every * per_epoch
     model.train()
     tic = time.perf_counter()
     for images, targets in stream:
@@ -170,7 +166,7 @@ def _steps(
         tic = toc
         if budget is not None:
             stop = _follow_budget(budget, step, toc, log)
-        if step >= stop or step % save_every == 0:
+        if step >= stop or checkpoint_due(step, cfg.optim, per_epoch):
             break
     return step, stop
 

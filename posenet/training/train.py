@@ -95,6 +95,19 @@ def before_loader_fork() -> None:
     cv2.setNumThreads(1)
 
 
+def loader_processes(workers: int) -> dict[str, Any]:
+    """DataLoader arguments for `workers` persistent single-threaded loader processes (kept over the
+    epochs' ends: the samplers' streams run on), with this process made safe to fork them from."""
+    if workers > 0:
+        before_loader_fork()
+    return {"num_workers": workers, "persistent_workers": workers > 0, "worker_init_fn": worker_init}
+
+
+def checkpoint_due(step: int, o: OptimConfig, per_epoch: int) -> bool:
+    """Whether `step` ends a checkpoint period: every `o.ckpt_every` epochs of `per_epoch` steps."""
+    return step % (o.ckpt_every * per_epoch) == 0
+
+
 def make_optimizer(
     model: torch.nn.Module, o: OptimConfig, total_iters: int | Callable[[], int]
 ) -> tuple[torch.optim.Optimizer, LambdaLR]:
@@ -451,14 +464,7 @@ def _loader(
 ) -> DataLoader | BatchLoader:
     """Batches in the sampler's order; `workers` persistent single-threaded processes. With `cache_root`
     (data.loader 'cache'), from the packed cache there, augmented on `device` (posenet.data.cache)."""
-    if workers > 0:
-        before_loader_fork()
-    args = {
-        "num_workers": workers,
-        "persistent_workers": workers > 0,
-        "pin_memory": device.type == "cuda",
-        "worker_init_fn": worker_init,
-    }
+    args = {**loader_processes(workers), "pin_memory": device.type == "cuda"}
     if cache_root is not None:
         return cache_loader(cache_root, dataset, sampler, args, device)
     return DataLoader(dataset, batch_size=sampler.batch_size, sampler=sampler, **args)
@@ -553,18 +559,13 @@ def _loop(run: _Run, ckpt: Path | None, log: RunLog | None) -> None:
         return
     run.model.train()
     run.sampler.set_epoch(*divmod(run.step, run.sampler.steps_per_epoch))
-    for done in _steps(run, log):
+    for done, due in _steps(run, log):
         if done and run.world > 1:  # every process, before rank 0 saves
             run.weight_spread = rank_weight_spread(run.model)
             if ckpt is not None:
                 tqdm.write(f"DDP: {run.world} processes, largest weight difference: {run.weight_spread:.1e}")
-        if ckpt is not None and (done or _saves_here(run)):
+        if ckpt is not None and due:
             save_checkpoint(ckpt, _checkpoint(run))
-
-
-def _saves_here(run: _Run) -> bool:
-    """Whether the step just taken ends a checkpoint period (every optim.ckpt_every epochs)."""
-    return run.step % (run.cfg.optim.ckpt_every * run.sampler.steps_per_epoch) == 0
 
 
 def _follow_budget(run: _Run, log: RunLog | None) -> None:
@@ -608,12 +609,12 @@ def rank_weight_spread(model: torch.nn.Module) -> float:
     return float((high - low).max())
 
 
-def _steps(run: _Run, log: RunLog | None) -> Iterator[bool]:
+def _steps(run: _Run, log: RunLog | None) -> Iterator[tuple[bool, bool]]:
     """One optimisation step per batch of the stream up to the stop step, yielding after each whether it
-    was the last; losses are averaged over the processes and logged with the images the step took over
-    all processes (the global batch). The losses stay on the device and are read back every
-    `optim.log_every` steps and before a checkpoint, all those steps' rows in one transfer: the
-    host never waits for a step it has queued."""
+    was the last and whether a checkpoint is due (the last, or every ckpt_every epochs). Losses are
+    averaged over the processes and logged with the images the step took over all processes (the global
+    batch); they stay on the device and are read back every `optim.log_every` steps and before a
+    checkpoint, all those steps' rows in one transfer: the host never waits for a step it has queued."""
     per_epoch = run.sampler.steps_per_epoch
     tic = time.perf_counter()
     pending: list[tuple[dict[str, Any], torch.Tensor]] = []  # logged rows whose losses are on the device
@@ -644,13 +645,14 @@ def _steps(run: _Run, log: RunLog | None) -> Iterator[bool]:
             dist.all_reduce(values)
             values[:-1] /= run.world
         done = run.step >= run.stop
+        due = done or checkpoint_due(run.step, run.cfg.optim, per_epoch)
         if log is not None:
             toc = time.perf_counter()
             row = {"step": run.step, "epoch": epoch, "lr": lr, "step_s": toc - tic, "wait_s": wait}
             pending.append((row, values))
-            if done or run.step % run.cfg.optim.log_every == 0 or _saves_here(run):
+            if due or run.step % run.cfg.optim.log_every == 0:
                 _write_rows(log, pending)
-        yield done
+        yield done, due
         if done:
             return
         tic = time.perf_counter()
