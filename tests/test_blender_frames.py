@@ -22,15 +22,18 @@ def test_camera_matrix_maps_world_points_into_the_blender_camera_frame():
 
 
 def test_identity_pose_is_the_flip_about_x():
-    np.testing.assert_allclose(camera_matrix_world(np.eye(3), np.zeros(3)), np.diag([1.0, -1.0, -1.0, 1.0]))
+    m = camera_matrix_world(np.eye(3), np.zeros(3))
+    np.testing.assert_array_equal(m, np.diag([1.0, -1.0, -1.0, 1.0]))  # (F I)^T and -I^T 0: exact
 
 
 def test_intrinsics_from_K():
     K = np.array([[600.0, 0, 300.25], [0, 600.0, 260.75], [0, 0, 1]])
     intr = intrinsics_from_K(K, 640, 480)
-    assert intr.lens_mm == pytest.approx(600 * intr.sensor_width_mm / 640)
-    assert intr.shift_x == pytest.approx((319.5 - 300.25) / 640)
-    assert intr.shift_y == pytest.approx((260.75 - 239.5) / 640)
+    # the same float64 operations as intrinsics_from_K (640 / 2 - 0.5 = 319.5 and 480 / 2 - 0.5 = 239.5
+    # exactly): the same floats
+    assert intr.lens_mm == 600 * intr.sensor_width_mm / 640
+    assert intr.shift_x == (319.5 - 300.25) / 640
+    assert intr.shift_y == (260.75 - 239.5) / 640
     centred = intrinsics_from_K(np.array([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]]), 640, 480)
     assert centred.shift_x == centred.shift_y == 0.0
 
@@ -48,6 +51,8 @@ def test_skew_and_non_square_pixels_are_refused(K):
 def test_sun_points_its_local_z_at_the_light():
     d = np.array([0.3, -0.5, 0.8])
     m = light_matrix_world(d)
-    np.testing.assert_allclose(m[:3, 2], d / np.linalg.norm(d), atol=1e-12)
+    np.testing.assert_array_equal(m[:3, 2], d / np.linalg.norm(d))  # its z column is that very quotient
+    # x and y: a cross product and a normalisation of unit vectors, a few u64 (1.1e-16) an entry, so the
+    # Gram matrix and the determinant within ~1e-15 of I and 1, where a left-handed frame's det is -1
     np.testing.assert_allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-12)
-    assert np.linalg.det(m[:3, :3]) == pytest.approx(1.0)
+    assert np.linalg.det(m[:3, :3]) == pytest.approx(1.0, abs=1e-12)
