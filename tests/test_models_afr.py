@@ -60,6 +60,8 @@ def test_gamma_zero_is_identity_and_gamma_moves_output() -> None:
     with torch.no_grad():
         afr.gamma.fill_(1.0)
         pgsa.gamma.fill_(1.0)
+    # gamma = 1 adds the branches: allclose's 1e-5 |x| + 1e-8 is ~170 u32 above the sum's float32 rounding, so
+    # only a branch that contributes passes (the seeded default-initialised ones add entries of O(0.1))
     assert not torch.allclose(afr(x), x) and not torch.allclose(pgsa(z), z)
 
 
