@@ -151,7 +151,8 @@ def test_a_flip_scores_zero_for_an_object_declared_symmetric_only() -> None:
     assert s_sym["add_0.1d"] == s_sym["mssd_0.1d"] == s_sym["ar_mssd"] == 1.0
     assert s_asym["add_0.1d"] == s_asym["mssd_0.1d"] == 0.0 and s_asym["adds_0.1d"] == 1.0
     expected_ar = np.mean([float(moved) < f * diameter for f in np.arange(1, 11) * 0.05])
-    assert s_asym["ar_mssd"] == pytest.approx(expected_ar)
+    # recalls of 0 or 1 (MSSD 0.26 m lies 0.16 m past the last threshold) averaged: k / 10 both ways
+    assert s_asym["ar_mssd"] == expected_ar
 
 
 # --- the BOP19 results file -----------------------------------------------------------------------------
@@ -187,7 +188,7 @@ def test_bop_csv_times_are_per_image_and_poses_round_trip(tmp_path: Path) -> Non
         {"scene_id": 1, "im_id": 1004, "obj_id": 2, "R": R[2], "t": [0.0, 0.05, 1.0], "time_s": 0.02},
     ]
     records = per_image_times(records)
-    assert [r["time_s"] for r in records] == pytest.approx([0.04, 0.04, 0.02])
+    assert [r["time_s"] for r in records] == [0.04, 0.04, 0.02]  # 0.0 + 0.01 + 0.03 rounds to 0.04's float
     path = tmp_path / "posenet_scgen-test.csv"
     path.write_text(bop.results_csv(records))
     header, rows = parse_bop_csv(path)
