@@ -119,12 +119,15 @@ def test_mask_loss_kinds() -> None:
     assert float(mask_loss(raw, target, "l1")) == (1.0 + 1.0) / 2
     assert mask_probability(raw, "l1").tolist() == [[[[1.0, 0.0]]]]
     sigmoid = [1 / (1 + math.exp(-2.0)), 1 / (1 + math.exp(1.0))]
+    # float32 sigmoid: exp to an ulp or two (its error shrinks by e / (1 + e) in the quotient), the sum and
+    # the quotient a u each, against float64's: within 4 u
     assert mask_probability(raw, "bce").flatten().tolist() == pytest.approx(sigmoid, rel=4 * u)
 
 
 def test_region_loss_is_uniform_cross_entropy_at_zero_logits() -> None:
     labels = torch.tensor([[[1, 2], [0, 3]]])
     visible = (labels > 0).float()[:, None]
+    # float32: log of the sum of five exact e^0 (a u or so), three equal terms summed and divided by 3 (3 u)
     assert math.isclose(
         float(region_loss(torch.zeros(1, 5, 2, 2), labels, visible)), math.log(5), rel_tol=8 * 2**-24
     )
@@ -169,6 +172,8 @@ def test_summary_keys_and_recalls() -> None:
     s = summarise({k: v.tolist() for k, v in errs.items()}, diameter=0.2, symmetric=False)
     assert {"re_deg", "te_m", "add_0.02m", "add_0.1d", "adds_0.1d", "esa"} <= set(s)
     assert s["add_0.02m"] == 0.75 and s["add_0.1d"] == 0.75
+    # float64: each te the norm of a one-entry offset (2 - 2 is 0 exactly), a u64 or so, and a mean of four
+    # summed in another order: a few u64, inside isclose's 1e-9, where a wrong mean (over 3) is 33 %
     assert math.isclose(s["te_m"], (0.01 + 0.019 + 0.05) / 4)
 
 
