@@ -80,7 +80,7 @@ def test_the_box_at_the_true_pose_is_the_true_box(dataset_dir: Path, sequence_da
 def test_box_geometry():
     """IoU, clipping to the image and the share in view, on boxes worked by hand."""
     assert box_iou((0, 0, 10, 10), (0, 0, 10, 10)) == 1.0
-    assert box_iou((0, 0, 10, 10), (5, 0, 10, 10)) == pytest.approx(50 / 150)
+    assert box_iou((0, 0, 10, 10), (5, 0, 10, 10)) == 50 / 150  # integer areas, one quotient: the same float
     assert box_iou((0, 0, 10, 10), (20, 0, 10, 10)) == 0.0
     assert clip_box((-5, 2, 10, 4), (8, 8)) == (0, 2, 5, 4)
     assert clip_box((9, 0, 3, 3), (8, 8)) is None
@@ -95,7 +95,8 @@ def test_the_detector_learns_the_clipped_full_object_box(dataset_dir: Path):
     boxes = target_boxes(insts)
     assert len(boxes) == len(insts)
     for inst, (x0, y0, x1, y1) in zip(insts, boxes, strict=True):
-        assert (x0, y0, x1 - x0, y1 - y0) == pytest.approx(clip_box(inst.bbox_obj, inst.image_size))
+        # whole pixels clipped at whole-pixel borders: small integers, exact in the float32 edges
+        assert (x0, y0, x1 - x0, y1 - y0) == clip_box(inst.bbox_obj, inst.image_size)
         assert 0 <= x0 < x1 <= inst.image_size[0] and 0 <= y0 < y1 <= inst.image_size[1]
 
 
@@ -166,7 +167,8 @@ def test_a_tracked_sequence_keeps_its_target(sequence_dataset: Path, sequence_ck
         centre = project(np.zeros((1, 3)), now.R, now.t, _camera(now))[0]
         assert np.all(np.abs(centre - roi.center) <= roi.scale / 2), (key, centre, roi)
         pose, source = tracker(frame.image, frame.camera)
-        assert source == TRACK and pose.box == pytest.approx(seed) and tracker.detections == 0
+        # the given box comes back as its own floats (Predictor: user_crops[0])
+        assert source == TRACK and pose.box == seed and tracker.detections == 0
 
 
 def _invoke(*args: object) -> str:
