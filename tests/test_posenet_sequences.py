@@ -87,7 +87,7 @@ def test_sequence_figures_orders_frames_and_summarises_each_sequence():
     assert [s["frame"] for s in fig["series"]] == list(range(6))
     assert [s["time_s"] for s in fig["series"]] == [0.0, 2.0, 4.0, 6.0, 8.0, 10.0]
     assert fig["series"][4]["re_deg"] is None and fig["series"][5]["te_m"] is None
-    assert fig["series"][3]["te_m"] == pytest.approx(0.03)
+    assert fig["series"][3]["te_m"] == 0.01 * 3  # the record's own te_m
     assert (fig["re_deg_median"], fig["re_deg_max"]) == (1.5, 3.0)
     floor_t, floor_deg = rounding_floor(t + [0.0, 0.0, 0.05], 2.0)  # the estimate's largest |t| too
     assert fig["jitter_t_m"] <= floor_t  # a depth error growing linearly is still constant velocity
@@ -147,7 +147,8 @@ def test_eval_on_a_sequence_split_reports_each_sequence(
         assert f["frames"] == f["evaluated"] == frames and len(f["series"]) == frames
         assert [s["time_s"] for s in f["series"]] == [k * dt for k in range(frames)]
         errors = [s["re_deg"] for s in f["series"]]
-        assert f["re_deg_median"] == pytest.approx(np.median(errors)) and f["re_deg_max"] == max(errors)
+        # np.median of the same floats (JSON keeps them: repr), an order-free middle pair's (a + b) / 2
+        assert f["re_deg_median"] == np.median(errors) and f["re_deg_max"] == max(errors)
         t_bound, rot_bound = labelled_jitter_bound(f["sequence_id"])
         assert f["jitter_t_m_truth"] <= t_bound and f["jitter_rot_deg_truth"] <= rot_bound
         assert (
