@@ -48,6 +48,8 @@ def test_dataset_has_bop_layout_and_one_metadata_row_per_image(small_dataset: Pa
         assert all(r[column] != "" for r in rows)
     assert len([f for f in files if "/rgb/" in f]) == 12
     info = read_json(small_dataset / "models" / "models_info.json")["1"]
+    # the bundled model was scaled to 0.2 m and stored as float32 vertices (u32 |p| each): its farthest pair
+    # within 2 u32 x 0.2 m, so 1.2e-7 relative, then x 1000 (a u64)
     assert info["diameter"] == pytest.approx(200.0, rel=1e-6)
 
 
@@ -63,7 +65,7 @@ def test_sample_rendered_alone_equals_sample_from_the_run(small_dataset: Path):
     assert (mask == ann.mask).all() and (visib == ann.mask_visib).all()
     x, y, w, h = ann.bbox_visib
     xyz = read_xyz_exr(layout.xyz(split, 7))
-    assert np.allclose(xyz, ann.xyz[y : y + h, x : x + w].astype(np.float16), atol=0)
+    assert np.array_equal(xyz, ann.xyz[y : y + h, x : x + w].astype(np.float16))  # the EXR's half floats
 
 
 def test_same_seed_gives_identical_annotations(small_dataset: Path, tmp_path: Path):
@@ -150,8 +152,10 @@ def test_output_that_is_a_file_is_refused(tmp_path: Path):
 def test_user_mesh_is_normalised(tmp_path: Path):
     mesh_path = tmp_path / "box.stl"
     trimesh.creation.box(extents=[3.0, 1.0, 2.0]).export(str(mesh_path))
-    assert load_target(mesh_path).diameter == pytest.approx(0.2)
-    assert load_target(mesh_path, keep_scale=True).diameter == pytest.approx(np.sqrt(14))
+    # the corners (+-1.5, +-0.5, +-1) are exact in the STL's float32, so the diameter is sqrt(9 + 1 + 4)
+    # correctly rounded; scaled to 0.2 m it is d x (0.2 / d), two roundings: within 2 u64 of 0.2
+    assert load_target(mesh_path).diameter == pytest.approx(0.2, rel=1e-15)
+    assert load_target(mesh_path, keep_scale=True).diameter == np.sqrt(14)
 
 
 def test_saved_depth_round_trips_without_wrapping(small_dataset: Path):
