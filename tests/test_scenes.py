@@ -49,6 +49,8 @@ def test_pose_is_uniform_on_so3_and_target_stays_in_frame(spacecraft):
 def test_default_distance_range_gives_60_to_300_px_diameter():
     cfg = load_config()
     lo, hi = distance_range_m(cfg, 0.2)
+    # f d / px and back: the same float64 product over its own quotient, two roundings, within 2 u64 of 300
+    # and 60 (approx's 1e-6 is loose), where a swapped end or another focal is O(1)
     assert 600 * 0.2 / lo == pytest.approx(300) and 600 * 0.2 / hi == pytest.approx(60)
 
 
@@ -84,7 +86,8 @@ def test_bad_config_is_named(overrides, message):
 def test_resolution_keeps_field_of_view(tmp_path):
     cfg = load_config(resolution=(320, 240))
     assert cfg["camera"]["fx"] == 300 and cfg["camera"]["cx"] == 159.5
-    assert distance_range_m(cfg, 0.2) == pytest.approx(distance_range_m(load_config(), 0.2))
+    # s = 1/2: fx and the pixel range halve exactly, so f d / px is the same float
+    assert distance_range_m(cfg, 0.2) == distance_range_m(load_config(), 0.2)
 
 
 def test_config_file_toml_and_yaml(tmp_path):
