@@ -130,6 +130,8 @@ def test_any_principal_point_and_portrait_images_are_exact(model):
     for bb, mm in zip(b, m, strict=True):
         assert (bb.instance == mm.instance).mean() >= 0.999
         both = (bb.depth > 0) & (mm.depth > 0)
+        # the same float32 hits as in test_blender_geometry's depth test, whose 1e-3 m is not derived (an
+        # open item of issue 59), here at depths under 0.25 m
         assert both.sum() > 50 and np.abs(bb.depth - mm.depth)[both].mean() < 1e-3
 
 

@@ -71,6 +71,11 @@ def test_masks_agree_with_mitsuba(rendered):
 
 
 def test_depth_agrees_with_mitsuba(rendered):
+    # What 1e-3 m bounds: both renderers' float32 hits of the same triangles on the same pixel-centre rays,
+    # a few u32 x (origin + range) / cos(incidence) apart (~1e-6 m head-on at 7 m, more at grazing hits),
+    # plus any pixel where the two meet different triangles at an edge (up to the gap between surfaces).
+    # Neither the incidence nor that share is bounded, so the mean's 1e-3 m is not derived (an open item
+    # of issue 59); a ray through another point of its pixel moves a slanted surface by ~z / 2f x tan(i).
     for spec, b, m in zip(*rendered, strict=True):
         both = (b.depth > 0) & (m.depth > 0)
         assert np.abs(b.depth - m.depth)[both].mean() < 1e-3, spec.index
