@@ -16,12 +16,14 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
 import torch
 from torch import nn
 
 from posenet.checkpoint import load_model
 
 U32 = 2**-24  # float32's unit roundoff
+U32_RAY_HIT = 128  # two ray casters' depths at one pixel, in u32 of the scale: median_depth_gap
 
 
 def depth_and_width(model: nn.Module) -> tuple[int, int]:
@@ -81,3 +83,18 @@ def gram_schmidt_gain(d6: torch.Tensor) -> float:
     s, n1 = float(d6.abs().max()), float(a1.norm())
     across = float(torch.linalg.cross(a1 / n1, a2).norm())
     return math.sqrt(3) * s * (1 / n1 + (1 + float(a2.norm()) / n1) / across)
+
+
+def median_depth_gap(a: np.ndarray, b: np.ndarray, t: np.ndarray, diameter: float) -> float:
+    """The median over the pixels both depth maps hit of |a - b| in u32 of the scale of the coordinates
+    a hit is computed from: its depth, and the target's vertices, within |t| + D of the camera.
+
+    At most U32_RAY_HIT for two ray casters that meet the same triangle on the same pixel-centre ray in
+    float32: the hit distance is a ratio of triple products of vertex differences, ~16 roundings of
+    coordinates of that scale, times 1/cos of the incidence, under 1/0.7 for most pixels (a body's pixels
+    spread as cos(incidence): on a sphere a quarter lie past 60 deg), so ~32 u / 0.7 each and 128 u
+    between two. A ray through another point of its pixel (a convention off by d px) moves a slanted
+    surface by ~tan(incidence) z d / f: 0.1 px at f = 300 px and 45 deg is 3e-4 z, thousands of u."""
+    both = (a > 0) & (b > 0)
+    scale = b[both] + float(np.linalg.norm(t)) + diameter
+    return float(np.median(np.abs(a[both] - b[both]) / scale)) / U32
