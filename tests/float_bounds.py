@@ -1,4 +1,5 @@
-"""How far two float32 forwards of one network may differ: the one home for the tests' rounding bounds.
+"""The one home for the tests' rounding bounds: how far two float32 forwards of one network may differ
+(below), and two ray casters' depths (median_depth_gap).
 
 Two runs of the same network differ in their summation order (another batch size is another GEMM
 blocking; onnxruntime and torch have their own kernels; a module and its written-out equations group
