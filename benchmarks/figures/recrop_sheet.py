@@ -27,7 +27,7 @@ from posenet.data.boxes import read_boxes
 from posenet.data.camera import make_camera
 from posenet.data.layout import Instance, scan_split
 from posenet.errors import PosenetError
-from posenet.predict.overlay import contact_sheet, thickness
+from posenet.predict.overlay import contact_sheet, draw_box, draw_label
 from posenet.predict.recrop import box_iou
 from scgen.io.atomic import atomic_write_bytes
 
@@ -46,13 +46,6 @@ def parse_args() -> argparse.Namespace:
     return ap.parse_args()
 
 
-def draw_box(image: np.ndarray, box: tuple[float, ...], colour: tuple[int, int, int]) -> None:
-    """[x, y, w, h] over pixels x .. x + w - 1, as posenet.predict.overlay draws a pose's box."""
-    x, y, w, h = box
-    corners = (round(x - 0.5), round(y - 0.5)), (round(x + w - 0.5), round(y + h - 0.5))
-    cv2.rectangle(image, *corners, colour, thickness(image))
-
-
 def tile(predictor: Predictor, instance: Instance, box: tuple[float, ...]) -> np.ndarray:
     """The instance's image with its true box, the first crop box and the last, and their IoUs."""
     image = cv2.imread(str(instance.rgb), cv2.IMREAD_COLOR)
@@ -60,9 +53,9 @@ def tile(predictor: Predictor, instance: Instance, box: tuple[float, ...]) -> np
     first, last = pose.crops[0], pose.crops[-1]
     for b, colour in ((instance.bbox_obj, TRUE), (first, FIRST), (last, LAST)):
         draw_box(image, b, colour)
-    text = f"IoU {box_iou(first, instance.bbox_obj):.2f} -> {box_iou(last, instance.bbox_obj):.2f}"
-    for ink, width in (((0, 0, 0), 3), ((255, 255, 255), 1)):
-        cv2.putText(image, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, ink, width, cv2.LINE_AA)
+    draw_label(
+        image, f"IoU {box_iou(first, instance.bbox_obj):.2f} -> {box_iou(last, instance.bbox_obj):.2f}", TRUE
+    )
     return image
 
 
@@ -73,7 +66,7 @@ def run(args: argparse.Namespace) -> None:
     tiles = [tile(predictor, i, boxes[i.key]) for i in chosen[: args.n]]
     if not tiles:
         raise PosenetError(f"no image of {args.data} {args.split} has a box in {args.boxes}")
-    ok, jpg = cv2.imencode(".jpg", contact_sheet(tiles), [cv2.IMWRITE_JPEG_QUALITY, 90])
+    _, jpg = cv2.imencode(".jpg", contact_sheet(tiles), [cv2.IMWRITE_JPEG_QUALITY, 90])
     atomic_write_bytes(args.out, jpg.tobytes())
     print(f"wrote {args.out}: {len(tiles)} images, {args.passes} passes")
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from posenet.data.camera import Camera, project
 from posenet.data.object_model import ObjectModel
-from posenet.predict.predictor import Pose
+from posenet.predict.predictor import Box, Pose
 
 POSE_COLOUR = (60, 220, 60)  # BGR: the silhouette edge
 BOX_COLOUR = (0, 200, 255)
@@ -36,10 +36,7 @@ def draw_pose(image: np.ndarray, pose: Pose, obj: ObjectModel, camera: Camera, l
     out = image.copy() if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     size, lw = (out.shape[1], out.shape[0]), thickness(out)
     if pose.box is not None:
-        x, y, w, h = pose.box
-        cv2.rectangle(
-            out, (round(x - 0.5), round(y - 0.5)), (round(x + w - 0.5), round(y + h - 0.5)), BOX_COLOUR, lw
-        )
+        draw_box(out, pose.box, BOX_COLOUR)
     in_front = (
         pose.R is not None and pose.t is not None and np.all(obj.vertices @ pose.R.T[:, 2] + pose.t[2] > 0)
     )
@@ -51,14 +48,26 @@ def draw_pose(image: np.ndarray, pose: Pose, obj: ObjectModel, camera: Camera, l
         for tip, colour in zip(tips, AXIS_COLOURS, strict=True):
             cv2.line(out, _pt(o), _pt(tip), colour, lw + 1, cv2.LINE_AA)
     text = f"{label} score {pose.score:.2f} conf {pose.confidence:.2f}"
-    colour = WARN_COLOUR if pose.flags else (255, 255, 255)
     if pose.flags:
         text += " " + ",".join(pose.flags)
-    scale = max(0.4, max(out.shape[:2]) / 1200)
-    origin = (6, round(22 * scale / 0.5))
-    for ink, width in (((0, 0, 0), lw + 2), (colour, lw)):  # a dark outline, then the text
-        cv2.putText(out, text.strip(), origin, cv2.FONT_HERSHEY_SIMPLEX, scale, ink, width, cv2.LINE_AA)
+    draw_label(out, text.strip(), WARN_COLOUR if pose.flags else (255, 255, 255))
     return out
+
+
+def draw_box(image: np.ndarray, box: Box, colour: tuple[int, int, int]) -> None:
+    """Draw [x, y, w, h] (pixels x .. x + w - 1) on `image` in place, its edges through the outer pixels'
+    centres."""
+    x, y, w, h = box
+    corners = (round(x - 0.5), round(y - 0.5)), (round(x + w - 0.5), round(y + h - 0.5))
+    cv2.rectangle(image, *corners, colour, thickness(image))
+
+
+def draw_label(image: np.ndarray, text: str, colour: tuple[int, int, int]) -> None:
+    """Write `text` at the top left of `image` in place, sized to the image, over a dark outline."""
+    lw, scale = thickness(image), max(0.4, max(image.shape[:2]) / 1200)
+    origin = (6, round(22 * scale / 0.5))
+    for ink, width in (((0, 0, 0), lw + 2), (colour, lw)):
+        cv2.putText(image, text, origin, cv2.FONT_HERSHEY_SIMPLEX, scale, ink, width, cv2.LINE_AA)
 
 
 def _pt(p: np.ndarray) -> tuple[int, int]:
