@@ -19,8 +19,10 @@ from scgen.cli import main
 from scgen.dataset.validate import check_sequences
 from scgen.errors import ScgenError
 from scgen.scenes import load_config
+from scgen.scenes.attitude import nominal_rotation, ray_rotation
 from scgen.scenes.motion.orbit import PROFILES
-from scgen.scenes.motion.tumble import ATTITUDE_MODES
+from scgen.scenes.motion.sequence import draw_sequence, minimal_rotation
+from scgen.scenes.motion.tumble import ATTITUDE_MODES, mass_properties
 
 
 def sequence_generator(**sequence: Any) -> Generator:
@@ -253,3 +255,129 @@ def test_motion_blur_is_the_target_centres_image_motion_over_the_exposure():
         assert a.imaging.motion_blur_px > 0
         angle = np.degrees(np.arctan2(shift[1], shift[0])) % 180.0
         assert min(abs(a.imaging.motion_blur_deg - angle), 180 - abs(a.imaging.motion_blur_deg - angle)) < 0.1
+
+
+# ---------------------------------------------------------------------------------------------------------
+# initial_attitude = "pose": frame 0 drawn from the [pose] table, as an independent sample is
+
+CONE = {"distribution": "cone", "max_angle_deg": 20.0, "roll_deg": [-20.0, 20.0]}
+# roundoff bounds below count U = 2^-53 = 1.1e-16, the relative error of one float64 operation
+
+
+def pose_generator(pose: dict[str, Any] | None = None, **sequence: Any) -> Generator:
+    """sequence_generator's, with a `[pose]` table too (the cone above unless given)."""
+    overrides = {"sequence": sequence, "pose": CONE if pose is None else pose}
+    return Generator.load(overrides=overrides, resolution=(160, 120), backend="mitsuba", quality="draft")
+
+
+def cone_place(R: np.ndarray, ray: np.ndarray, pose: dict[str, Any]) -> tuple[float, float]:
+    """(tilt, roll) in degrees of the egocentric R seen along `ray`, in the corridor of a cone `pose` table:
+    the allocentric attitude ray_rotation(ray)^T R is Rz(roll) Rtilt R_nominal (scgen.scenes.attitude), so
+    with R_rel = that times R_nominal^T, w = R_rel^T z = Rtilt^T z gives the tilt (the angle of w from z)
+    and Rtilt (the smallest rotation taking w onto z), and R_rel Rtilt^T = Rz(roll) the roll."""
+    rel = ray_rotation(ray).T @ R @ nominal_rotation(pose).T
+    w = rel[2]  # R_rel^T z
+    tilt = minimal_rotation(w, np.array([0.0, 0.0, 1.0]))
+    twist = rel @ tilt.T
+    return (
+        float(np.degrees(np.arctan2(np.hypot(w[0], w[1]), w[2]))),
+        float(np.degrees(np.arctan2(twist[1, 0], twist[0, 0]))),
+    )
+
+
+def test_initial_attitude_pose_puts_frame_0_in_the_cone():
+    """With initial_attitude = "pose" and a cone [pose] table, frame 0 of every sequence (any profile, any
+    attitude motion) is seen along the ray to the target's centre of mass at the tilt and roll its cone
+    draw says, so inside the cone; and 50 sequences fill it."""
+    gen = pose_generator(frames=2, dt_s=5.0, initial_attitude="pose")
+    props = mass_properties([mesh for _, mesh in gen.model.parts])
+    places, modes = [], set()
+    for s in range(50):
+        frame0 = gen.sequence(s)[0]
+        modes.add(frame0.sequence.attitude)
+        com = np.asarray(frame0.target.t) + frame0.target.R_mat @ props.centre_of_mass
+        tilt, roll = cone_place(frame0.target.R_mat, com, gen.cfg["pose"])
+        drawn = draw_sequence(gen.seed, s, gen.cfg["sequence"], props, gen.cfg["pose"]).cone
+        # R passes from the draw to the label through ~50 float64 roundings (the ray's rotation, the
+        # quaternion q0 and back, R_IL^T R_IL R_LB, R_LC^T R_LB, the centre-of-mass ray recomputed from the
+        # track, this decomposition), each moving it by <= a few U (1.1e-16): < 1e-13 rad in all, so
+        # 1e-10 deg (1.7e-12 rad) is met with a margin of 10 and a wrong frame misses by degrees
+        assert abs(tilt - drawn.cone_deg) < 1e-10 and abs(roll - drawn.roll_deg) < 1e-10
+        places.append((tilt, roll))
+    assert modes == set(ATTITUDE_MODES)
+    tilt, roll = np.array(places).T
+    assert tilt.max() <= 20.0 + 1e-10 and np.abs(roll).max() <= 20.0 + 1e-10
+    # cos(tilt) is uniform over [cos 20, 1]: P(tilt > 10) = (cos 10 - cos 20) / (1 - cos 20) = 0.75, so 50
+    # draws give 37 +- 3 above half the angle (>= 25 is 4 standard deviations down); roll is uniform
+    # over +-20, each half-range's outer half drawn with probability 1/4 a sequence
+    assert (tilt > 10.0).sum() >= 25
+    assert roll.max() > 10.0 and roll.min() < -10.0
+
+
+def test_an_lvlh_hold_on_the_corridor_stays_where_frame_0_put_it():
+    """lvlh_hold on a corridor approach with the camera tracking the target: the approach line is fixed in
+    LVLH and so is the target, so the tracking camera never turns (R_LC constant) and R = R_LC^T R_LB and
+    the centre of mass's ray are the same at every frame. Seen along that ray, every frame is frame 0
+    (within roundoff); seen along the ray to the model origin (an independent sample's allocentric frame,
+    posenet's), the tilt moves by at most the angle between the two rays, <= asin(|c| / |com|)."""
+    frames = 30
+    gen = pose_generator(frames=frames, dt_s=10.0, initial_attitude="pose", pointing="target",
+                         profile_probs={"corridor_approach": 1.0},
+                         attitude_probs={"lvlh_hold": 1.0})  # fmt: skip
+    props = mass_properties([mesh for _, mesh in gen.model.parts])
+    c = props.centre_of_mass
+    closed = 0.0
+    for s in range(12):
+        specs = gen.sequence(s)
+        R = np.array([sp.target.R_mat for sp in specs])
+        t = np.array([sp.target.t for sp in specs])
+        com = t + R @ c
+        allo = np.array([ray_rotation(x).T @ r for x, r in zip(com, R, strict=True)])
+        # frame to frame, R and the ray differ only by roundoff: R_IL^T (R_IL R_LB) (<= 12 U a step), the
+        # tracking camera's transport over frames - 1 steps (each an identity or a turn by the ~4 U its
+        # two rays' rounding differ by, plus a product's 6 U) and the ray's rotation (a few U): under
+        # 29 x 12 U + 30 U ~ 5e-14 rad at frame 29; 1e-12 rad bounds it with a margin of 20, while the
+        # orbit's turn of LVLH in a hold left out would move R by n dt ~ 1e-2 rad a frame
+        drift = Rotation.from_matrix(allo @ allo[0].T).magnitude()
+        assert drift.max() < 1e-12
+        tilt0, _ = cone_place(R[0], com[0], gen.cfg["pose"])
+        cross = np.linalg.norm(np.cross(t, com), axis=1)
+        apart = np.arctan2(cross, np.sum(t * com, axis=1))  # the angle between the two rays
+        assert np.all(apart <= np.arcsin(np.linalg.norm(c) / np.linalg.norm(com, axis=1)) + 1e-12)
+        for k in range(frames):
+            # the line of sight in the target's frame moves by the angle between the rays, exactly (a
+            # rotation keeps angles): the tilt, an angle from the nominal line, moves by at most that
+            tilt, _ = cone_place(R[k], t[k], gen.cfg["pose"])
+            assert abs(tilt - tilt0) <= np.degrees(apart[k]) + 1e-10
+            assert tilt <= 20.0 + np.degrees(apart[k]) + 1e-10
+        closed += specs[0].sequence.range_m - specs[-1].sequence.range_m
+    assert closed > 12 * 3.0  # the approaches move (0.02-0.2 m/s for 290 s): the test is not of a hold
+
+
+def test_initial_attitude_uniform_is_the_draw_without_the_key_and_pose_changes_only_q0():
+    """initial_attitude = "uniform" (the default) leaves every frame what a config without the key gives;
+    "pose" draws from its own stream, so it changes the attitude at t = 0 and nothing else drawn."""
+    base = {"frames": 4, "dt_s": 3.0, "rate_deg": [1.0, 4.0]}
+    absent, uniform = pose_generator(**base), pose_generator(initial_attitude="uniform", **base)
+    posed = pose_generator(initial_attitude="pose", **base)
+    props = mass_properties([mesh for _, mesh in absent.model.parts])
+    for s in range(8):
+        assert [f.to_dict() for f in uniform.sequence(s)] == [f.to_dict() for f in absent.sequence(s)]
+        a = draw_sequence(absent.seed, s, absent.cfg["sequence"], props, absent.cfg["pose"])
+        b = draw_sequence(posed.seed, s, posed.cfg["sequence"], props, posed.cfg["pose"])
+        assert a.cone is None and b.cone is not None
+        assert b.attitude.q0 != a.attitude.q0
+        assert b.profile == a.profile
+        for field in ("altitude_m", "roll_rad", "sky_longitude", "sky_roll", "earth_spin_deg"):
+            assert getattr(b, field) == getattr(a, field)
+        assert np.array_equal(b.error, a.error) and b.sun == a.sun
+        assert (b.attitude.mode, b.attitude.omega0) == (a.attitude.mode, a.attitude.omega0)
+
+
+def test_a_bad_initial_attitude_is_one_line_naming_it():
+    """A bad sequence.initial_attitude is refused in one line naming the key and the value."""
+    bad = r"^sequence\.initial_attitude must be one of uniform, pose, got 'cone'$"
+    with pytest.raises(ScgenError, match=bad):
+        load_config(overrides={"sequence": {"initial_attitude": "cone"}})
+    with pytest.raises(ScgenError, match="sequence.initial_attitude' must be a string"):
+        load_config(overrides={"sequence": {"initial_attitude": 1}})

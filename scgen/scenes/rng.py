@@ -23,7 +23,9 @@ def factor_rng(seed: int, index: int, factor: str) -> np.random.Generator:
     return np.random.default_rng([int(seed), int(index), zlib.crc32(factor.encode())])
 
 
-SEQUENCE_PARTS = ("orbit", "profile", "attitude", "sun", "pointing", "camera", "background", "finish", "sky")
+SEQUENCE_PARTS = (
+    "orbit", "profile", "attitude", "sun", "pointing", "camera", "background", "finish", "sky", "pose",
+)  # fmt: skip
 _SEQUENCE_TAG = zlib.crc32(b"sequence")
 
 

@@ -2,11 +2,13 @@
 
 A sequence draws, each from its own stream (`sequence_rng(seed, s, part)`), an orbit, a relative-motion
 profile and an attitude motion (scgen.scenes.motion.orbit, scgen.scenes.motion.tumble), a sun fixed in
-inertial space, a camera pointing and a camera; frame k at t_k = k dt is then an ordinary SceneSpec, with the
-camera at the chaser (its frame the scene's world frame, as for every sample), so the render, camera,
-annotation and writer paths are those of an independent sample. Every frame is computed from the whole
-sequence at once (the tumble integrated over the whole span, the pointing carried from frame to frame), so
-frame k is the same whatever frames are asked for. Pure numpy/scipy; docs/sequences.md gives the equations.
+inertial space, a camera pointing and a camera (and, with `initial_attitude = "pose"`, the attitude at
+t = 0 as the `[pose]` table draws an independent sample's: `initial_pose`); frame k at t_k = k dt is then
+an ordinary SceneSpec, with the camera at the chaser (its frame the scene's world frame, as for every
+sample), so the render, camera, annotation and writer paths are those of an independent sample. Every
+frame is computed from the whole sequence at once (the tumble integrated over the whole span, the
+pointing carried from frame to frame), so frame k is the same whatever frames are asked for. Pure
+numpy/scipy; docs/sequences.md gives the equations.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from scgen.errors import ScgenError
+from scgen.scenes.attitude import ConeDraw, sample_attitude
 from scgen.scenes.config.camera import CameraSettings
-from scgen.scenes.config.checks import check_range, is_number
+from scgen.scenes.config.checks import check_choice, check_range, is_number
 from scgen.scenes.finish import sample_finish
 from scgen.scenes.imaging import sample_imaging
 from scgen.scenes.motion.orbit import (
@@ -44,6 +47,7 @@ from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, SceneSpec, Seque
 
 EARTH_ROTATION_RAD_S = 7.2921159e-5  # the Earth's sidereal spin rate (IERS), turning its map under the orbit
 POINTING_MODES = ("target", "fixed")
+INITIAL_ATTITUDES = ("uniform", "pose")  # the target's attitude at t = 0: uniform over SO(3), or `[pose]`'s
 SUNLIT = "normal"  # the illumination level of a sunlit frame: the sun's true irradiance
 ECLIPSED = "eclipse"  # the level of a frame in the Earth's shadow: no sunlight
 
@@ -58,6 +62,7 @@ DEFAULT_SEQUENCE: dict[str, Any] = {
     "profile_probs": {name: 1.0 / len(PROFILES) for name in PROFILES},  # scgen.scenes.motion.orbit.PROFILES
     "profiles": {},  # per profile, its ranges overriding DEFAULT_PROFILE_RANGES[profile]
     "attitude_probs": {mode: 1.0 / len(ATTITUDE_MODES) for mode in ATTITUDE_MODES},
+    "initial_attitude": "uniform",  # uniform: over SO(3); pose: frame 0 seen as `[pose]` draws (initial_pose)
     "rate_deg": [0.5, 5.0],  # deg/s, spin and tumble rates
     "pointing": "target",  # target: the camera tracks the target; fixed: held in LVLH from frame 0
     "pointing_error_deg": 1.0,  # the boresight off the target by a constant angle uniform in [0, this]
@@ -111,6 +116,7 @@ def check_sequence(seq: dict[str, Any]) -> None:
         raise ScgenError(
             f"sequence.pointing must be one of {', '.join(POINTING_MODES)}, got {seq['pointing']!r}"
         )
+    check_choice("sequence.initial_attitude", seq["initial_attitude"], INITIAL_ATTITUDES)
     for key, names in (("profile_probs", PROFILES), ("attitude_probs", ATTITUDE_MODES)):
         probs = seq[key]
         unknown = sorted(set(probs) - set(names))
@@ -151,6 +157,15 @@ def look_basis(d: np.ndarray, roll: float) -> np.ndarray:
     return np.stack([c * x + s * y, -s * x + c * y, d], axis=1)
 
 
+def initial_camera(profile: Any, n: float, roll: float, error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R_LC at t = 0 (the same for both pointings: the boresight on the target's centre of mass, rolled,
+    then turned by the pointing error) and the unit ray from the camera to that centre, camera axes."""
+    r, _ = profile.state(n, 0.0)
+    d = -r / np.linalg.norm(r)
+    R_lc = look_basis(d, roll) @ error
+    return R_lc, R_lc.T @ d
+
+
 def minimal_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The smallest rotation taking unit a onto unit b (about a x b)."""
     axis = np.cross(a, b)
@@ -177,7 +192,8 @@ def track_pointing(d: np.ndarray, R0: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class SequenceDraw:
     """What sequence s of a seed drew: the orbit's altitude, the profile, the attitude motion, the sun,
-    the pointing (roll at frame 0; pointing error as a rotation of the camera, camera axes) and the sky."""
+    the pointing (roll at frame 0; pointing error as a rotation of the camera, camera axes), the sky, and
+    with `initial_attitude = "pose"` a cone `[pose]` table's draw for frame 0 (else None)."""
 
     altitude_m: float
     profile: Any  # an scgen.scenes.motion.orbit profile
@@ -188,10 +204,31 @@ class SequenceDraw:
     sky_longitude: float  # the sun's ecliptic longitude (a date) and the sky's roll about it (rad)
     sky_roll: float
     earth_spin_deg: float  # the Earth's sidereal angle at t = 0
+    cone: ConeDraw | None = None  # frame 0's place in the `[pose]` corridor (initial_attitude "pose", cone)
 
 
-def draw_sequence(seed: int, sequence: int, seq: dict[str, Any], props: MassProperties) -> SequenceDraw:
-    """Sequence `sequence`'s draws, each from its own stream."""
+def initial_pose(
+    rng: np.random.Generator, pose: dict[str, Any], R_lc: np.ndarray, ray: np.ndarray
+) -> tuple[tuple[float, float, float, float], ConeDraw | None]:
+    """The target's attitude at t = 0, body -> LVLH (= body -> I then) as a quaternion (w, x, y, z), for
+    which the camera R_LC sees it as an independent sample drawn from the `pose` table on `ray` would be
+    (scgen.scenes.attitude.sample_attitude): R = R_LC^T R_LB, so R_LB = R_LC R. And the cone draw.
+
+    `ray` is the ray to the centre of mass, not to the model origin an independent sample's t holds: the
+    origin sits at t = com - R c, which depends on the R being drawn, while the centre of mass is where
+    the camera points (off by the pointing error) and the point the motion turns about. The two rays part
+    by at most asin(|c| / |com|), |c| the centre of mass's offset from the model origin."""
+    R, cone = sample_attitude(rng, pose, ray)
+    q = Rotation.from_matrix(R_lc @ R).as_quat()[[3, 0, 1, 2]]
+    return tuple(float(x) for x in q), cone
+
+
+def draw_sequence(
+    seed: int, sequence: int, seq: dict[str, Any], props: MassProperties, pose: dict[str, Any] | None = None
+) -> SequenceDraw:
+    """Sequence `sequence`'s draws, each from its own stream; `pose` (the config's `[pose]` table) is
+    needed with `initial_attitude = "pose"`, whose draw has its own stream too and replaces only the
+    attitude motion's uniform attitude at t = 0 (still drawn, so the motion's rates are the same)."""
     orbit = draw_orbit(sequence_rng(seed, sequence, "orbit"), tuple(seq["altitude_km"]))
     rng = sequence_rng(seed, sequence, "profile")
     name = _choice(rng, seq["profile_probs"])
@@ -205,8 +242,15 @@ def draw_sequence(seed: int, sequence: int, seq: dict[str, Any], props: MassProp
     az = rng.uniform(0.0, 2.0 * math.pi)
     error = Rotation.from_rotvec(off * np.array([math.sin(az), -math.cos(az), 0.0])).as_matrix()
     lam, sky_roll, spin = sequence_rng(seed, sequence, "sky").uniform(0.0, 2.0 * math.pi, 3)
+    cone = None
+    if seq["initial_attitude"] == "pose":
+        if pose is None:
+            raise ScgenError('sequence.initial_attitude "pose" needs the config\'s [pose] table')
+        R_lc, ray = initial_camera(profile, orbit.n, roll, error)
+        q0, cone = initial_pose(sequence_rng(seed, sequence, "pose"), pose, R_lc, ray)
+        attitude = replace(attitude, q0=q0)
     return SequenceDraw(orbit.altitude_m, profile, attitude, sun, roll, error, lam, sky_roll,
-                        math.degrees(spin))  # fmt: skip
+                        math.degrees(spin), cone)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -295,7 +339,7 @@ def sample_sequence(
     sequence * frames + k. Depends only on (seed, sequence, cfg, target geometry)."""
     seq = cfg["sequence"]
     frames = seq["frames"]
-    draw = draw_sequence(seed, sequence, seq, props)
+    draw = draw_sequence(seed, sequence, seq, props, cfg["pose"])
     times = np.arange(frames) * float(seq["dt_s"])
     track = sequence_track(draw, times, shape.diameter / seq["spacecraft_diameter_m"], props, seq["pointing"])
     camera = CameraSpec.from_config(cfg["camera"])
