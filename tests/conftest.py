@@ -45,6 +45,23 @@ def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The posenet tests' dataset (posenet_helpers.posenet_dataset: 24 images of seed 0), read-only; a
+    module that needs another one defines its own `dataset_dir`."""
+    from posenet_helpers import posenet_dataset
+
+    return posenet_dataset(tmp_path_factory)
+
+
+@pytest.fixture(scope="session")
+def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 2-step GDR-Net checkpoint on `dataset_dir` (posenet_helpers.tiny_pose_checkpoint), read-only."""
+    from posenet_helpers import tiny_pose_checkpoint
+
+    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory)
+
+
+@pytest.fixture(scope="session")
 def spacecraft() -> TargetModel:
     """The bundled spacecraft (read-only)."""
     return load_target()

@@ -12,7 +12,6 @@ import albumentations as A
 import numpy as np
 import pytest
 import torch
-from posenet_helpers import posenet_dataset
 
 from posenet.config import config_from_dict, smoke_config
 from posenet.data import open_split
@@ -23,11 +22,6 @@ from posenet.models import ModelConfig
 
 MODEL = ModelConfig.create("gdrnet", "smoke")
 TARGETS = ("roi_xyz", "roi_mask_visib", "roi_mask_full", "roi_region", "site")
-
-
-@pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
 
 
 def items(root: Path, **data: object) -> list[dict[str, torch.Tensor]]:

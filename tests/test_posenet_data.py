@@ -13,7 +13,7 @@ import pytest
 import torch
 import trimesh
 from click.testing import CliRunner
-from posenet_helpers import occluded_dataset, posenet_dataset, tiny_pose_checkpoint
+from posenet_helpers import occluded_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
 from posenet.config import DataConfig, smoke_config
@@ -25,11 +25,6 @@ from posenet.data.io import read_mask
 from posenet.data.layout import Instance
 from posenet.data.object_model import farthest_point_sampling, load_object_model
 from posenet.errors import PosenetError
-
-
-@pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
 
 
 def no_aug(**changes):

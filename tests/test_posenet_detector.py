@@ -15,7 +15,6 @@ import torch
 from budget_checks import assert_the_decay_ends_at_the_budget
 from click.testing import CliRunner
 from float_bounds import forward_rel
-from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
 from posenet.detection.detect import Detection, box_metrics, detect, detector_dataset, load_detector
@@ -45,21 +44,11 @@ def _invoke(*args: object) -> str:
 
 
 @pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
-
-
-@pytest.fixture(scope="module")
 def detector_run(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The cpu preset as a user gets it (its pinned thread count gives the same losses every run)."""
     root = tmp_path_factory.mktemp("detector")
     _invoke("train-detector", "--data", dataset_dir, "--out", root / "run", "--config", "cpu")
     return root / "run"
-
-
-@pytest.fixture(scope="module")
-def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory)
 
 
 def test_detector_learns_its_boxes(dataset_dir: Path, detector_run: Path) -> None:

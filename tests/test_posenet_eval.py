@@ -9,7 +9,6 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 from float_bounds import gram_schmidt_gain, pose_checkpoint_rel, rotation_outputs
-from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.cli import main
 from posenet.evaluation.evaluate import SUMMARY_FIGURES, evaluate, format_table, summary_rows
@@ -46,17 +45,7 @@ def assert_records_agree(a: dict, b: dict, diameter: float, rel: float, gain: fl
     assert b["esa"] == pytest.approx(a["esa"], abs=esa_bound), "esa"
 
 
-@pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
-
-
-@pytest.fixture(scope="module")
-def checkpoint(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory)
-
-
-def test_eval_writes_summary_and_predictions(dataset_dir: Path, checkpoint: Path, tmp_path: Path) -> None:
+def test_eval_writes_summary_and_predictions(dataset_dir: Path, pose_ckpt: Path, tmp_path: Path) -> None:
     boxes = tmp_path / "boxes.json"
     assert CliRunner().invoke(main, ["boxes", "--data", str(dataset_dir), "--out", str(boxes)]).exit_code == 0
     out = tmp_path / "test.json"
@@ -65,7 +54,7 @@ def test_eval_writes_summary_and_predictions(dataset_dir: Path, checkpoint: Path
         "--data",
         dataset_dir,
         "--ckpt",
-        checkpoint,
+        pose_ckpt,
         "--boxes",
         boxes,
         "--json",
@@ -90,15 +79,15 @@ def test_eval_writes_summary_and_predictions(dataset_dir: Path, checkpoint: Path
     assert len(rows[0]["R"]) == 9 and len(rows[0]["t"]) == 3
 
 
-def test_batched_evaluation_gives_the_batch_1_records(dataset_dir: Path, checkpoint: Path) -> None:
+def test_batched_evaluation_gives_the_batch_1_records(dataset_dir: Path, pose_ckpt: Path) -> None:
     with rotation_outputs() as rot6d:
-        one = evaluate(dataset_dir, checkpoint, workers=0, batch_size=1)
-    batched = evaluate(dataset_dir, checkpoint, workers=0, batch_size=3)
+        one = evaluate(dataset_dir, pose_ckpt, workers=0, batch_size=1)
+    batched = evaluate(dataset_dir, pose_ckpt, workers=0, batch_size=3)
     assert len(one.records) > 3 and len(one.records) % 3  # several batches, the last one partial
     assert [list(r) for r in batched.records] == [list(r) for r in one.records]  # same keys, same order
     # one forward of one RoI per record, then the latency's (evaluate times the network after the split)
     gain = max(gram_schmidt_gain(d6[0]) for d6 in rot6d[: len(one.records)])
-    rel = pose_checkpoint_rel(checkpoint)
+    rel = pose_checkpoint_rel(pose_ckpt)
     for a, b in zip(one.records, batched.records, strict=True):
         assert (a["scene_id"], a["im_id"]) == (b["scene_id"], b["im_id"])
         assert_records_agree(a, b, one.diameter, rel, gain)
@@ -114,8 +103,8 @@ def test_batched_evaluation_gives_the_batch_1_records(dataset_dir: Path, checkpo
         assert sb[key] == pytest.approx(s1[key], abs=worst.get(base, 0.0) + 1e-12), key
 
 
-def test_group_summaries_and_summary_rows(dataset_dir: Path, checkpoint: Path) -> None:
-    result = evaluate(dataset_dir, checkpoint, workers=0)
+def test_group_summaries_and_summary_rows(dataset_dir: Path, pose_ckpt: Path) -> None:
+    result = evaluate(dataset_dir, pose_ckpt, workers=0)
     ids = [r["im_id"] for r in result.records]
     whole = result.summary_of(set(ids))
     assert whole == {k: result.summary[k] for k in whole}  # every image: the split's own summary
@@ -137,14 +126,14 @@ def test_group_summaries_and_summary_rows(dataset_dir: Path, checkpoint: Path) -
 
 
 def test_by_factor_table_averages_checkpoints_of_one_variant(
-    dataset_dir: Path, checkpoint: Path, tmp_path: Path
+    dataset_dir: Path, pose_ckpt: Path, tmp_path: Path
 ) -> None:
     groups = tmp_path / "groups.json"
     args = ["stats", str(dataset_dir), "--sample-groups", "3", "--groups-out", str(groups)]
     res = CliRunner().invoke(scgen_main, args)
     assert res.exit_code == 0, res.output
     out = tmp_path / "factors.json"
-    args = ["eval", "--data", dataset_dir, "--ckpt", checkpoint, "--ckpt", checkpoint, "--by-factor", groups]
+    args = ["eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--ckpt", pose_ckpt, "--by-factor", groups]
     res = CliRunner().invoke(main, [str(a) for a in [*args, "--json", out, "--workers", 0]])
     assert res.exit_code == 0, res.output
     table = json.loads(out.read_text())
@@ -152,7 +141,7 @@ def test_by_factor_table_averages_checkpoints_of_one_variant(
     assert set(table["groups"]) == set(json.loads(groups.read_text())["groups"])
     assert "illumination/" in res.output
     res = CliRunner().invoke(
-        main, [str(a) for a in ["eval", "--data", dataset_dir, "--ckpt", checkpoint, "--ckpt", checkpoint]]
+        main, [str(a) for a in ["eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--ckpt", pose_ckpt]]
     )
     assert res.exit_code == 1 and "only compared with --by-factor" in res.output
 

@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from posenet_helpers import posenet_dataset
 
 from posenet.config import smoke_config
 from posenet.data import open_split
@@ -28,11 +27,6 @@ from posenet.geometry import (
 # good to ~10 eps = 2e-15; the 1e-12 bounds below leave 500x for another CPU's kernels.
 # The figures hang on those kernels: `make test` reruns the module under a second kernel set
 pytestmark = pytest.mark.numeric
-
-
-@pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
 
 
 def random_rotations(n: int, seed: int = 0) -> torch.Tensor:

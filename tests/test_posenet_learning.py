@@ -52,11 +52,6 @@ MAX_TE_RATIO = 0.6
 
 
 @pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
-
-
-@pytest.fixture(scope="module")
 def unseen_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """More held-out scenes: another seed's images, every split of them."""
     return posenet_dataset(tmp_path_factory, seed=1)

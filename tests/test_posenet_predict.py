@@ -18,7 +18,6 @@ import pytest
 import torch
 from click.testing import CliRunner
 from float_bounds import U32, forward_rel, gram_schmidt_gain, pose_checkpoint_rel, rotation_outputs
-from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
 
 from posenet.checkpoint import load_checkpoint, save_checkpoint
 from posenet.cli import main
@@ -47,16 +46,6 @@ def _invoke(*args: object, code: int = 0) -> str:
 
 def _lines(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines()]
-
-
-@pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
-
-
-@pytest.fixture(scope="module")
-def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory)
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 from click.testing import CliRunner
-from posenet_helpers import posenet_dataset, tiny_pose_checkpoint
+from posenet_helpers import tiny_pose_checkpoint
 
 from posenet.cli import main
 from posenet.config import smoke_config
@@ -17,11 +17,6 @@ from posenet.data import open_split
 from posenet.evaluation.metrics import rotation_error_deg, translation_error
 from posenet.models import ModelConfig
 from posenet.predict.ransac import ransac_poses
-
-
-@pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
 
 
 def test_ground_truth_xyz_and_mask_give_the_ground_truth_pose(dataset_dir: Path) -> None:

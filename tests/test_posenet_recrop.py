@@ -27,7 +27,7 @@ from posenet.predict.recrop import box_iou, in_view, projected_box
 from posenet.predict.sources import dataset_frames, load_frame
 from posenet.predict.track import DETECTOR, TRACK, Tracker
 from scgen.io import read_sequence_frames
-from tests.posenet_helpers import posenet_dataset, tiny_pose_checkpoint
+from tests.posenet_helpers import tiny_pose_checkpoint
 from tests.test_posenet_predict import TINY_DETECTOR
 
 # The annotated bbox_obj spans the pixel centres the silhouette covers; the projected vertices' extent,
@@ -35,16 +35,6 @@ from tests.test_posenet_predict import TINY_DETECTOR
 # where a part thinner than a pixel (a strut, an antenna tip) covers no centre at its end: by at most 2 px
 # per edge on these fixtures' spacecraft (deterministic renders, not a timing), "to rounding".
 EDGE_PX = 2.0
-
-
-@pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
-
-
-@pytest.fixture(scope="module")
-def pose_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tiny_pose_checkpoint(dataset_dir, tmp_path_factory)
 
 
 def _instances(root: Path, split: str = "test") -> list:

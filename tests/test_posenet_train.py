@@ -17,7 +17,6 @@ import torch
 import yaml
 from budget_checks import assert_the_decay_ends_at_the_budget
 from click.testing import CliRunner
-from posenet_helpers import posenet_dataset
 
 from posenet.cli import main
 from posenet.config import OptimConfig, load_config
@@ -32,11 +31,6 @@ model: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, fc_d
 data: {workers: 1, pad_scale: 1.5}
 optim: {batch_size: 4, epochs: 10, warmup_iters: 2, ckpt_every: 100}
 """
-
-
-@pytest.fixture(scope="module")
-def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return posenet_dataset(tmp_path_factory)
 
 
 @pytest.fixture
