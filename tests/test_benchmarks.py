@@ -180,3 +180,39 @@ def test_no_script_imports_another() -> None:
     names = {Path(s).stem for s in PYTHON_SCRIPTS}
     for path in [*(BENCH / s for s in PYTHON_SCRIPTS), *(BENCH / "harness").glob("*.py")]:
         assert not imported_modules(path) & names, path
+
+
+PACKAGES = ("scgen", "posenet")
+
+
+def private_uses(path: Path) -> list[str]:
+    """What `path` reaches of scgen's and posenet's private parts: a module or name imported from them
+    with a leading underscore, or a `_name` attribute of something imported from them (Python's
+    convention for "not API"; dunders are not private)."""
+    tree = ast.parse(path.read_text())
+    ours: set[str] = set()
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] in PACKAGES:
+            found += [node.module] if any(p.startswith("_") for p in node.module.split(".")) else []
+            found += [f"{node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
+            ours |= {a.asname or a.name for a in node.names}
+        elif isinstance(node, ast.Import):
+            for alias in (a for a in node.names if a.name.split(".")[0] in PACKAGES):
+                found += [alias.name] if any(p.startswith("_") for p in alias.name.split(".")) else []
+                ours.add(alias.asname or alias.name.split(".")[0])
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__"):
+            base = node.value
+            while isinstance(base, ast.Attribute):
+                base = base.value
+            if isinstance(base, ast.Name) and base.id in ours:
+                found.append(ast.unparse(node))
+    return found
+
+
+def test_scripts_use_only_public_names() -> None:
+    """Benchmarks measure the packages through what they publish: no private (`_`) module, name or
+    attribute of scgen or posenet, in the scripts or their harness."""
+    for path in [*(BENCH / s for s in PYTHON_SCRIPTS), *(BENCH / "harness").glob("*.py")]:
+        assert not private_uses(path), (path, private_uses(path))
