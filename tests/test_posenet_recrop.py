@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -171,13 +172,14 @@ def test_predict_track_on_a_sequence_dataset(
     sequence_dataset: Path, sequence_ckpt: Path, tmp_path_factory: pytest.TempPathFactory
 ):
     """predict --track --data: the frames in time order with their sequence, frame and time; each
-    sequence starts at the detector, and the printed count of detector runs is the records'."""
+    sequence starts at the detector, and the printed count of detector runs is the records'; each
+    sequence's overlays are a video of its frames at the images' size."""
     root = tmp_path_factory.mktemp("track")
     (root / "tiny.yaml").write_text(TINY_DETECTOR)
     data = ["--data", sequence_dataset]
     _invoke("train-detector", *data, "--out", root / "det", "--config", root / "tiny.yaml", "--max-steps", 1)
     output = _invoke("predict", *data, "--ckpt", sequence_ckpt, "--detector", root / "det" / "last.pt",
-                     "--track", "--min-score", 0, "--no-vis", "--out", root / "pred")  # fmt: skip
+                     "--track", "--min-score", 0, "--out", root / "pred")  # fmt: skip
     records = [json.loads(line) for line in (root / "pred" / "predictions.jsonl").read_text().splitlines()]
     order = read_sequence_frames(sequence_dataset)
     seen = [order[r["scene_id"], r["im_id"]] for r in records]
@@ -189,6 +191,15 @@ def test_predict_track_on_a_sequence_dataset(
     assert all(r["box_source"] == DETECTOR for r in firsts)
     ran = sum(r["box_source"] == DETECTOR for r in records)
     assert f"the detector ran on {ran} of {len(records)} inputs" in output
+    for sequence_id in {r["sequence_id"] for r in records}:
+        video = cv2.VideoCapture(str(root / "pred" / "sequences" / f"{sequence_id:06d}.mp4"))
+        frames = int(video.get(cv2.CAP_PROP_FRAME_COUNT))
+        size = (int(video.get(cv2.CAP_PROP_FRAME_WIDTH)), int(video.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        video.release()
+        assert frames == sum(r["sequence_id"] == sequence_id for r in records)
+        camera = json.loads((sequence_dataset / "camera.json").read_text())
+        assert size == (camera["width"], camera["height"])
+    assert not list((root / "pred" / "sequences").glob("*.partial.mp4"))
 
 
 def test_eval_refuses_passes_with_by_factor(tmp_path: Path):

@@ -80,8 +80,8 @@ def predict_inputs(
     passes: int = 1,
     track: bool = False,
 ) -> PredictInputs:
-    """The checked inputs of one predict run (nothing is written here). With `track`, a sequence
-    dataset's frames come in time order, sequence by sequence."""
+    """The checked inputs of one predict run (nothing is written here). A sequence dataset's frames come
+    in time order, sequence by sequence (what `track` and the per-sequence overlay videos need)."""
     if (source is None) == (data is None):
         raise PosenetError("give SOURCE (an image, folder, glob or video) or --data DIR, not both or neither")
     if box is not None and boxes is not None:
@@ -100,7 +100,7 @@ def predict_inputs(
         if camera is not None:
             raise PosenetError("--camera is taken from the dataset with --data; leave it out")
         frames = dataset_frames(data, split, obj_id)
-        if track and sequences:
+        if sequences:
             order = {k: (s.sequence_id, s.frame) for k, s in sequences.items()}
             frames.sort(key=lambda f: order.get(f.key, (-1, 0)) if f.key is not None else (-1, 0))
         user, total, fps, stream = None, len(frames), 0.0, frames

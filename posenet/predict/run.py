@@ -7,6 +7,7 @@ OUT/results.csv         --format bop: BOP19 results (scene_id,im_id,obj_id,score
 OUT/submission.csv      --format speedplus: filename,q0,q1,q2,q3,x,y,z per image (Kelvins SPEC style)
 OUT/overlays/*.jpg      per image: silhouette edge, axes and box at the predicted pose (not with --no-vis)
 OUT/overlay.mp4         a video input's overlays as a video
+OUT/sequences/ID.mp4    a sequence dataset's overlays, a video per sequence in time order (SEQUENCE_FPS)
 OUT/sheet.jpg           up to SHEET_TILES overlays spread over the inputs, side by side
 """
 
@@ -37,6 +38,7 @@ MISS = "miss"  # a box file's entry for an image where its detector found nothin
 PREDICTIONS_FILE = "predictions.jsonl"
 SHEET_TILES = 8
 JPEG_QUALITY = 90
+SEQUENCE_FPS = 10.0  # the frame rate of a sequence's overlay video, whatever the frames' spacing in time
 
 
 @dataclass
@@ -81,6 +83,7 @@ def run_predict(
     sheet_every = max(1, total // SHEET_TILES)
     sheet: list[np.ndarray] = []
     writer: cv2.VideoWriter | None = None
+    videos = SequenceVideos(out / "sequences")
     if vis and not video_fps:
         (out / "overlays").mkdir(exist_ok=True)
     noted: set[str] = set()
@@ -137,6 +140,8 @@ def run_predict(
                 else:
                     ok, jpg = cv2.imencode(".jpg", drawn, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
                     atomic_write_bytes(out / "overlays" / overlay_name(frame, index), jpg.tobytes())
+                    if seq is not None:
+                        videos.write(seq.sequence_id, drawn)
                 if index % sheet_every == 0 and len(sheet) < SHEET_TILES:
                     sheet.append(drawn)
                 predictor.timings.add("drawing", time.perf_counter() - t1)
@@ -151,6 +156,7 @@ def run_predict(
     if writer is not None:
         writer.release()
         run.files.append(out / "overlay.mp4")
+    run.files += videos.close()
     run.seconds = time.perf_counter() - tic
     _write_outputs(run, out, formats, sheet)
     return run
@@ -215,6 +221,44 @@ def _camera_for(frame: Frame, camera: Camera | None) -> tuple[Camera | None, str
 
 def _video_writer(path: Path, fps: float, size: tuple[int, int]) -> cv2.VideoWriter:
     return cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, size)
+
+
+class SequenceVideos:
+    """The overlays of a sequence dataset as one video per sequence, FOLDER/SEQUENCE_ID.mp4, in the order
+    the frames come (predict_inputs gives them in time order, sequence by sequence). Each video is
+    written under a partial name and renamed when its sequence ends: a stopped run leaves no video that
+    looks whole."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self.sequence: int | None = None
+        self.writer: cv2.VideoWriter | None = None
+        self.done: list[Path] = []
+
+    def write(self, sequence_id: int, image: np.ndarray) -> None:
+        """Append `image` to its sequence's video, ending the one before at a new sequence."""
+        if sequence_id != self.sequence:
+            self._end()
+            self.folder.mkdir(exist_ok=True)
+            self.sequence = sequence_id
+            self.writer = _video_writer(self._partial(), SEQUENCE_FPS, image.shape[1::-1])
+        assert self.writer is not None
+        self.writer.write(image)
+
+    def close(self) -> list[Path]:
+        """End the last video; every finished video's path."""
+        self._end()
+        return self.done
+
+    def _partial(self) -> Path:
+        return self.folder / f"{self.sequence:06d}.partial.mp4"
+
+    def _end(self) -> None:
+        if self.writer is None:
+            return
+        self.writer.release()
+        self.done.append(self._partial().replace(self.folder / f"{self.sequence:06d}.mp4"))
+        self.writer = None
 
 
 def _write_outputs(run: PredictRun, out: Path, formats: tuple[str, ...], sheet: list[np.ndarray]) -> None:
