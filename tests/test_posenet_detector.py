@@ -16,8 +16,16 @@ from budget_checks import assert_the_decay_ends_at_the_budget
 from click.testing import CliRunner
 from float_bounds import forward_rel
 
+from posenet.checkpoint import load_checkpoint
 from posenet.cli import main
-from posenet.detection.detect import Detection, box_metrics, detect, detector_dataset, load_detector
+from posenet.detection.detect import (
+    Detection,
+    box_metrics,
+    box_scores,
+    detect,
+    detector_dataset,
+    load_detector,
+)
 from posenet.detection.detector import (
     DetectionDataset,
     build_detector,
@@ -70,6 +78,27 @@ def test_detector_learns_its_boxes(dataset_dir: Path, detector_run: Path) -> Non
     assert trained["mean_iou"] >= 2 * untrained["mean_iou"]
     assert trained["mean_iou"] >= 1.5 * fixed["mean_iou"]
     assert (detector_run / "best.pt").is_file() and (detector_run / "tb").is_dir()
+
+
+def test_detections_are_scored_on_the_box_the_detector_learns(dataset_dir: Path, detector_run: Path) -> None:
+    """box_scores: IoU with target_boxes (bbox_obj clipped, what the detector learns and the pose network
+    is cropped around), bbox_visib's beside it; a detection at the one box scores 1 there and less at the
+    other where the two differ (occluded or clipped targets). Training selects best.pt on those scores."""
+    images = [i for i in image_groups(dataset_dir, "train", 1) if len(target_boxes(i))]
+    own, visib = [target_boxes(i) for i in images], [visible_boxes(i) for i in images]
+
+    def at(boxes: list[np.ndarray]) -> list[Detection]:
+        return [
+            Detection(i[0].key, tuple(map(float, b[0])), 1.0, 0.0) for i, b in zip(images, boxes, strict=True)
+        ]
+
+    # some targets are partly hidden, so that the two boxes differ
+    assert any(not np.array_equal(a, b) for a, b in zip(own, visib, strict=True))
+    on_own, on_visib = box_scores(at(own), images), box_scores(at(visib), images)
+    assert on_own["mean_iou"] == 1.0 > on_own["visib_mean_iou"]
+    assert on_visib["visib_mean_iou"] == 1.0 > on_visib["mean_iou"]
+    state = load_checkpoint(detector_run / "best.pt", kind="detector")
+    assert set(state["val"]) == set(on_own) and state["best_val_iou"] == state["val"]["mean_iou"]
 
 
 def test_stored_detector_boxes_reused_byte_for_byte(

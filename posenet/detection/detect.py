@@ -30,6 +30,8 @@ from posenet.detection.detector import (
     collate,
     detector_config_from_dict,
     image_groups,
+    target_boxes,
+    visible_boxes,
 )
 from posenet.detection.segmenter import MaskDetector, mask_box
 
@@ -171,7 +173,7 @@ def iou(a: tuple[float, ...] | None, b: np.ndarray) -> float:
 def box_metrics(dets: list[Detection], gt: list[np.ndarray]) -> dict[str, float]:
     """Mean IoU (a miss counts 0), the share of images at IoU >= 0.5, AP50 (single class, all-point
     interpolated; one detection per image) and misses, over images whose target is visible (gt[i]: the
-    visible boxes of dets[i])."""
+    boxes dets[i] is scored against, empty where the target is not visible)."""
     pairs = [(d, g) for d, g in zip(dets, gt, strict=True) if len(g)]
     ious = [iou(d.box, g) for d, g in pairs]
     order = sorted(
@@ -190,6 +192,17 @@ def box_metrics(dets: list[Detection], gt: list[np.ndarray]) -> dict[str, float]
         "iou50": float(np.mean([v >= 0.5 for v in ious])) if ious else float("nan"),
         "ap50": ap,
         "misses": sum(d.box is None for d, _ in pairs),
+    }
+
+
+def box_scores(dets: list[Detection], images: list[list[Instance]]) -> dict[str, float]:
+    """`box_metrics` of `dets` (one per image of `images`) against the box the detector learns and the
+    pose network is cropped around (target_boxes: bbox_obj clipped to the image), with the mean IoU, the
+    share at IoU >= 0.5 and AP50 against the visible pixels' box (`visible_boxes`, bbox_visib) beside them
+    under `visib_` keys."""
+    visib = box_metrics(dets, [visible_boxes(i) for i in images])
+    return box_metrics(dets, [target_boxes(i) for i in images]) | {
+        f"visib_{k}": visib[k] for k in ("mean_iou", "iou50", "ap50")
     }
 
 

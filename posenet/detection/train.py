@@ -1,10 +1,10 @@
 """Training the detector: the train split, selected on val, in a run folder like pose training's.
 
-OUT holds config.yaml, train_log.jsonl, tb/, last.pt (rewritten every ckpt_every epochs and at the stop)
-and best.pt: the checkpoint with the highest val mean IoU so far (misses count 0), scored whenever
-last.pt is written. Without a val split (or no image in it), best.pt is not written. With `minutes`, the
-schedule is fitted while it runs to end after that much wall time, as pose training's
-(posenet.training.budget).
+OUT holds config.yaml, train_log.jsonl, tb/, last.pt (rewritten every ckpt_every epochs and at the stop) and
+best.pt: the checkpoint with the highest val mean IoU so far (misses count 0) with the box it learns (bbox_obj
+clipped to the image; bbox_visib's beside it, posenet.detection.detect.box_scores), scored whenever last.pt is
+written. Without a val split (or no image in it), best.pt is not written. With `minutes`, the schedule is
+fitted while it runs to end after that much wall time, as pose training's (posenet.training.budget).
 """
 
 from __future__ import annotations
@@ -24,14 +24,13 @@ from torchvision.models.detection import FCOS
 from posenet.checkpoint import load_checkpoint, save_checkpoint
 from posenet.data import EpochSampler
 from posenet.data.layout import split_scenes
-from posenet.detection.detect import box_metrics, detect
+from posenet.detection.detect import box_scores, detect
 from posenet.detection.detector import (
     DetectionDataset,
     DetectorConfig,
     build_detector,
     collate,
     image_groups,
-    visible_boxes,
 )
 from posenet.errors import PosenetError
 from posenet.training.budget import TimeBudget, run_budget
@@ -213,10 +212,11 @@ def _save(
     metrics: dict[str, Any] = {}
     if val is not None:
         dets = detect(model, DetectionDataset(val, cfg, train=False), device)
-        metrics = box_metrics(dets, [visible_boxes(v) for v in val])
-        for k in ("mean_iou", "ap50", "misses"):
+        metrics = box_scores(dets, val)
+        for k in ("mean_iou", "ap50", "misses", "visib_mean_iou", "visib_ap50"):
             log.tb.add_scalar(f"val/{k}", metrics[k], step)
-        log.bar.write(f"step {step}: val mean IoU {metrics['mean_iou']:.3f}, AP50 {metrics['ap50']:.3f}")
+        log.bar.write(f"step {step}: val mean IoU {metrics['mean_iou']:.3f} (bbox_visib "
+                      f"{metrics['visib_mean_iou']:.3f}), AP50 {metrics['ap50']:.3f}")  # fmt: skip
     improved = val is not None and metrics["mean_iou"] > best
     best = metrics["mean_iou"] if improved else best
     state = {
