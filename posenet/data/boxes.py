@@ -23,7 +23,7 @@ import numpy as np
 from posenet.data.layout import Instance
 from posenet.errors import PosenetError
 
-Box = tuple[float, float, float, float]
+Box = tuple[float, float, float, float]  # [x, y, w, h]: pixels x .. x + w - 1 (posenet.data.crop)
 # The crop a missed image is still read with, so the loader needs no special case; its estimate is discarded
 MISS_PLACEHOLDER: Box = (0.0, 0.0, 1.0, 1.0)
 

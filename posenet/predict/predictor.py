@@ -22,6 +22,7 @@ import torch
 
 from posenet.checkpoint import load_checkpoint, model_from_state
 from posenet.config import config_from_dict
+from posenet.data.boxes import Box
 from posenet.data.camera import (
     Camera,
     make_camera,
@@ -40,7 +41,6 @@ from posenet.predict.pixels import to_bgr8
 from posenet.predict.ransac import MIN_POINTS, correspondences
 from posenet.predict.recrop import projected_box
 
-Box = tuple[float, float, float, float]  # [x, y, w, h]: pixels x .. x + w - 1 (posenet.data.crop)
 LOW_CONFIDENCE = 0.5  # below: the pose is flagged low_confidence
 FLAGS = ("no_detection", "behind_camera", "outside_view", "low_confidence")
 STAGES = ("decode", "detector", "crop", "pose_network", "solve", "drawing")  # timed per image (ms)
