@@ -25,6 +25,7 @@ from harness import parser, positive, run_script
 from posenet import Predictor
 from posenet.data.boxes import read_boxes
 from posenet.data.camera import make_camera
+from posenet.data.io import read_bgr
 from posenet.data.layout import Instance, scan_split
 from posenet.errors import PosenetError
 from posenet.predict.overlay import contact_sheet, draw_box, draw_label
@@ -48,7 +49,7 @@ def parse_args() -> argparse.Namespace:
 
 def tile(predictor: Predictor, instance: Instance, box: tuple[float, ...]) -> np.ndarray:
     """The instance's image with its true box, the first crop box and the last, and their IoUs."""
-    image = cv2.imread(str(instance.rgb), cv2.IMREAD_COLOR)
+    image = read_bgr(instance.rgb)
     pose = predictor(image, make_camera(instance.K, instance.dist), box)
     first, last = pose.crops[0], pose.crops[-1]
     for b, colour in ((instance.bbox_obj, TRUE), (first, FIRST), (last, LAST)):

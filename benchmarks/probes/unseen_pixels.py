@@ -23,23 +23,17 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
 from harness import parser, run_script
 
-from posenet.data.boxes import Box, clip_box, read_boxes
+from posenet.data.boxes import clip_box, read_boxes
 from posenet.data.io import read_bgr, read_mask
 from posenet.data.layout import Instance, scan_split
 from posenet.evaluation.evaluate import format_table
+from posenet.predict.recrop import box_iou
+from scgen.annotate.annotate import mask_bbox
 from scgen.dataset.layout import read_metadata
 
 NOISE_SIGMAS = 6.0  # the sky's noise a shown pixel stands above
 MAD_TO_SIGMA = 1.4826  # a Gaussian's standard deviation per median absolute deviation
 BGR_LUMA = np.array([0.114, 0.587, 0.299], np.float32)  # Rec. 601 weights, in OpenCV's channel order
-
-
-def box_iou(a: Box, b: Box) -> float:
-    """IoU of two (x, y, w, h) boxes."""
-    w = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
-    h = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
-    inter = w * h
-    return inter / (a[2] * a[3] + b[2] * b[3] - inter)
 
 
 def shown_pixels(inst: Instance) -> tuple[np.ndarray, np.ndarray]:
@@ -50,14 +44,6 @@ def shown_pixels(inst: Instance) -> tuple[np.ndarray, np.ndarray]:
     median = float(np.median(sky))
     floor = median + NOISE_SIGMAS * MAD_TO_SIGMA * float(np.median(np.abs(sky - median))) + 1.0
     return visible, visible & (luma > floor)
-
-
-def shown_box(shown: np.ndarray) -> Box | None:
-    """The pixel-edge box of the shown pixels, None where none is."""
-    ys, xs = np.nonzero(shown)
-    if not len(xs):
-        return None
-    return float(xs.min()), float(ys.min()), float(xs.max() + 1 - xs.min()), float(ys.max() + 1 - ys.min())
 
 
 def clean_sky(data: Path) -> set[tuple[int, int]]:
@@ -77,8 +63,7 @@ def split_rows(data: Path, split: str, boxes: Path | None, obj_id: int) -> list[
         if inst.key not in clean or inst.px_count_visib == 0 or target is None:
             continue
         visible, shown = shown_pixels(inst)
-        box = shown_box(shown)
-        unseen = 1.0 - (box_iou(box, target) if box is not None else 0.0)
+        unseen = 1.0 - box_iou(tuple(mask_bbox(shown)), target)  # no pixel shown: an empty box, IoU 0
         det = detected.get(inst.key)
         own = 1.0 - box_iou(det, target) if isinstance(det, tuple) else (1.0 if boxes is not None else np.nan)
         rows.append((shown.sum() / visible.sum(), unseen, own))
