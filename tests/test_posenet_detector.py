@@ -94,7 +94,7 @@ def test_detections_are_scored_on_the_box_the_detector_learns(dataset_dir: Path,
 
     # some targets are partly hidden, so that the two boxes differ
     assert any(not np.array_equal(a, b) for a, b in zip(own, visib, strict=True))
-    # a box's IoU with itself is its area over its area, exactly 1 in floats; with another box it is less
+    # the boxes are whole pixels, so a box's IoU with itself is computed exactly: 1; with another box, less
     on_own, on_visib = box_scores(at(own), images), box_scores(at(visib), images)
     assert on_own["mean_iou"] == 1.0 > on_own["visib_mean_iou"]
     assert on_visib["visib_mean_iou"] == 1.0 > on_visib["mean_iou"]
