@@ -2,15 +2,20 @@
 each for the old path (Cycles traces the full frame) beside the new (only the region the objects cover).
 
 First `--profile` samples timed by stage (Cycles' sync, BVH, path tracing, denoising, EXR; the aux
-render, labels, background, camera stage, annotation, writing). Then one worker renders `--frames`
-sampled scenes (640x480 by default) with one persistent backend, annotating and writing each sample as
-`scgen render` does, each scene once per mode in turn (A B A B); then `--naive-frames` of the same
-scenes with a backend rebuilt for every frame; then the quality presets in both modes against a
-many-sample full-frame reference (PSNR over the rendered objects, so the composited background does not
-inflate it).
+render, labels, background, camera stage, annotation, writing), each traced three ways in turn: the full
+frame, one box around every object, and a box per object or group of overlapping ones (the default).
+Then one worker renders `--frames` sampled scenes (640x480 by default) with one persistent backend,
+annotating and writing each sample as `scgen render` does, each scene once per mode in turn (A B A B);
+then `--naive-frames` of the same scenes with a backend rebuilt for every frame; then the quality
+presets in both modes against a many-sample full-frame reference (PSNR over the rendered objects, so the
+composited background does not inflate it); then, with `--settings-frames`, Cycles settings (samples,
+adaptive sampling, the denoiser's inputs) tried one at a time on the default preset against the same
+reference.
 
     .venv/bin/python benchmarks/bench_blender.py                      # profile, 30 frames, naive, presets
     .venv/bin/python benchmarks/bench_blender.py --frames 300 --naive-frames 0 --preset-frames 0
+    .venv/bin/python benchmarks/bench_blender.py --profile 0 --frames 0 --naive-frames 0 --preset-frames 0 \
+        --settings-frames 6 --ref-samples 512
 """
 
 from __future__ import annotations
@@ -29,8 +34,9 @@ from scgen import Generator
 from scgen.annotate import annotate
 from scgen.dataset.layout import Layout
 from scgen.dataset.writer import WriteOptions, write_sample
-from scgen.render.blender.backend import BlenderBackend
-from scgen.render.blender.settings import PRESETS, QualityPreset, configure_beauty
+from scgen.render.blender.backend import DENOISE_MARGIN_PX, BlenderBackend
+from scgen.render.blender.settings import FILTER_WIDTH_PX, PRESETS, QualityPreset, configure_beauty
+from scgen.render.region import full_frame, scene_region, traced_share
 from scgen.run.runner import write_static_files
 from scgen.scenes import load_config
 from scgen.scenes.model import TargetModel, load_target
@@ -66,7 +72,7 @@ def persistent_run(generator: Generator, specs: list[SceneSpec], quality: str) -
                 r["render_s"].append(t1 - t0)
                 r["sample_s"].append(time.perf_counter() - t0)
                 r["cycles"] += backend.cycles_s - c0
-                r["share"].append(backend.scene.region.share)
+                r["share"].append(traced_share(backend.scene.regions))
                 if k in (10, len(specs)):
                     r["rss"][k] = rss_mb()
             if k % 50 == 0:
@@ -84,11 +90,18 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
 
     import scgen.render.blender.backend as blender_backend
 
-    backend = BlenderBackend(generator.model, quality=quality)
+    backend = BlenderBackend(generator.model, quality=quality, region=True)
     scene = backend.scene
     stamps: list[tuple[float, str]] = []
     bpy.app.handlers.render_stats.append(lambda stats: stamps.append((time.perf_counter(), stats)))
-    times: dict[str, dict[str, list[float]]] = {m: {} for m in MODES}
+    hull = np.asarray(generator.model.mesh.convex_hull.vertices, np.float64)
+    paths = {  # what each path traces: the whole frame, one box around every object (the region path
+        # before 2026-11-28, Mitsuba's still), a box per object or group of overlapping objects (now)
+        "full frame": lambda spec: (full_frame(spec.camera.width, spec.camera.height),),
+        "one box": lambda spec: (scene_region(spec, hull, FILTER_WIDTH_PX / 2, DENOISE_MARGIN_PX),),
+        "regions": backend.regions,
+    }
+    times: dict[str, dict[str, list[float]]] = {m: {} for m in paths}
 
     def cycles_stages(t_call: float, t_end: float) -> dict[str, float]:
         """Cycles' stages of the render calls since t_call, from its progress reports."""
@@ -118,12 +131,11 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
         layout = Layout(out)
         write_static_files(layout, generator)
         for spec in specs:
-            for mode, trace_region in MODES.items():
-                backend.trace_region = trace_region
+            for mode, regions_of in paths.items():
                 t_sample = time.perf_counter()
                 timed("scene update (matrices, props)", mode, scene.update, spec)
-                region = timed("region", mode, backend.region, spec)
-                scene.set_region(region)
+                regions = timed("regions", mode, regions_of, spec)
+                scene.set_regions(regions)
                 stamps.clear()
                 t0 = time.perf_counter()
                 beauty = scene.render_beauty()
@@ -154,7 +166,13 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
                     mode,
                     {**{f"beauty {k}": v for k, v in beauty_stages.items()}, "of which denoising": denoise},
                 )
-                add(mode, {"pixels traced (share of frame)": region.share})
+                add(
+                    mode,
+                    {
+                        "pixels traced (share of frame)": traced_share(regions),
+                        "render calls per pass": len(regions),
+                    },
+                )
     backend.close()
     return {m: {stage: statistics.median(v) for stage, v in t.items()} for m, t in times.items()}
 
@@ -178,13 +196,18 @@ def foreground_psnr(rgb: np.ndarray, ref: np.ndarray, instance: np.ndarray) -> f
     return float(10 * np.log10(255.0**2 / max(1e-12, float(np.mean(err**2)))))
 
 
-def preset_run(model: TargetModel, specs: list[SceneSpec], ref_samples: int) -> list[tuple]:
-    """(preset, mode, seconds per frame, mean PSNR against a `ref_samples`-spp full-frame reference) per
-    preset and mode, the modes in turn on each scene."""
+def references(model: TargetModel, specs: list[SceneSpec], ref_samples: int) -> list:
+    """Each spec rendered full frame with `ref_samples` samples, no denoiser: the quality reference."""
     backend = BlenderBackend(model, region=False)
     configure_beauty(backend.scene.beauty, QualityPreset(ref_samples, 0.001, 8, 4, 4, None), gpu=False)
     refs = [backend.render(s) for s in specs]
     backend.close()
+    return refs
+
+
+def preset_run(model: TargetModel, specs: list[SceneSpec], refs: list) -> list[tuple]:
+    """(preset, mode, seconds per frame, mean PSNR against the references) per preset and mode, the modes
+    in turn on each scene."""
     rows = []
     for name in PRESETS:
         backend = BlenderBackend(model, quality=name)
@@ -200,6 +223,42 @@ def preset_run(model: TargetModel, specs: list[SceneSpec], ref_samples: int) -> 
                 psnrs[mode].append(foreground_psnr(buffers.rgb, ref.rgb, ref.instance))
         backend.close()
         rows += [(name, m, statistics.mean(times[m]), statistics.mean(psnrs[m])) for m in MODES]
+    return rows
+
+
+# Cycles settings tried against the default preset's (scene.cycles attributes). Each runs on a backend of
+# its own, set before its first render: a live Cycles session keeps the sample count it was made with,
+# and a later change of `samples` alone is not seen until something else makes Cycles start a new one.
+SETTINGS = {
+    "default preset": {},
+    "no adaptive sampling": {"use_adaptive_sampling": False},
+    "adaptive: min 4 samples, threshold 0.05": {"adaptive_min_samples": 4, "adaptive_threshold": 0.05},
+    "OIDN prefilter NONE": {"denoising_prefilter": "NONE"},
+    "OIDN albedo only": {"denoising_input_passes": "RGB_ALBEDO"},
+    "no denoiser": {"use_denoising": False},
+    "8 samples": {"samples": 8},
+    "12 samples": {"samples": 12},
+    "24 samples": {"samples": 24},
+}
+
+
+def settings_run(model: TargetModel, specs: list[SceneSpec], refs: list, threads: int) -> list[tuple]:
+    """(settings, seconds per render, mean PSNR against the references) for each of SETTINGS applied to
+    the default preset, the region path, one backend each with `threads` render threads."""
+    rows = []
+    for name, settings in SETTINGS.items():
+        backend = BlenderBackend(model, threads=threads)
+        for key, value in settings.items():
+            setattr(backend.scene.beauty.cycles, key, value)
+        backend.render(specs[0])  # warm-up: first sync and kernel load
+        times, psnrs = [], []
+        for spec, ref in zip(specs, refs, strict=True):
+            t0 = time.perf_counter()
+            buffers = backend.render(spec)
+            times.append(time.perf_counter() - t0)
+            psnrs.append(foreground_psnr(buffers.rgb, ref.rgb, ref.instance))
+        backend.close()
+        rows.append((name, statistics.mean(times), statistics.mean(psnrs)))
     return rows
 
 
@@ -240,6 +299,8 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--profile", type=int, default=3, help="samples profiled by stage (0: none)")
     ap.add_argument("--naive-frames", type=int, default=5)
     ap.add_argument("--preset-frames", type=int, default=3)
+    ap.add_argument("--settings-frames", type=int, default=0, help="scenes for the Cycles settings sweep")
+    ap.add_argument("--settings-threads", type=int, default=1, help="render threads in the settings sweep")
     ap.add_argument("--ref-samples", type=int, default=1024)
     ap.add_argument("--quality", default="default", choices=list(PRESETS))
     ap.add_argument("--resolution", type=int, nargs=2, default=(640, 480), metavar=("W", "H"))
@@ -251,7 +312,7 @@ def run(args: argparse.Namespace) -> None:
 
     model = load_target()
     cfg = load_config(resolution=tuple(args.resolution))
-    n = max(args.frames, args.naive_frames, args.preset_frames, args.profile)
+    n = max(args.frames, args.naive_frames, args.preset_frames, args.settings_frames, args.profile)
     generator = Generator(model, cfg, args.seed)
     specs = [generator.scene(i) for i in range(n)]
     width, height = args.resolution
@@ -270,10 +331,21 @@ def run(args: argparse.Namespace) -> None:
             print(f"  naive {naive:.2f} s/frame, persistent {same:.2f} s/frame: ratio {naive / same:.2f}x")
 
     if args.preset_frames:
+        refs = references(model, specs[: args.preset_frames], args.ref_samples)
         print(f"\npresets vs a {args.ref_samples}-spp reference, {args.preset_frames} scenes:")
         print(f"  {'preset':8s} {'mode':>10s} {'s/frame':>8s} {'PSNR dB':>8s}  settings")
-        for name, mode, s, psnr in preset_run(model, specs[: args.preset_frames], args.ref_samples):
+        for name, mode, s, psnr in preset_run(model, specs[: args.preset_frames], refs):
             print(f"  {name:8s} {mode:>10s} {s:8.2f} {psnr:8.2f}  {PRESETS[name]}")
+
+    if args.settings_frames:
+        chosen = specs[: args.settings_frames]
+        refs = references(model, chosen, args.ref_samples)
+        threads, n_ref = args.settings_threads, args.ref_samples
+        print(f"\nCycles settings on the default preset, region path, {threads} thread(s), vs a {n_ref}-spp "
+              f"reference, {args.settings_frames} scenes:")  # fmt: skip
+        print(f"  {'settings':42s} {'s/render':>9s} {'PSNR dB':>8s}")
+        for name, s, psnr in settings_run(model, chosen, refs, args.settings_threads):
+            print(f"  {name:42s} {s:9.3f} {psnr:8.2f}")
 
 
 if __name__ == "__main__":

@@ -33,6 +33,20 @@ def occluder_across_the_frame(spec):
     return replace(spec, props=(truss, *spec.props[1:]))
 
 
+def objects_apart(spec):
+    """The target's centre moved to the frame's upper left sixth and the first prop made a small truss in
+    its lower right, the other props dropped: the two cover disjoint regions with empty pixels between."""
+    K, width, height = spec.camera.K_mat, spec.camera.width, spec.camera.height
+    z = spec.target.t_vec[2]
+    at = lambda u, v: tuple(z * np.linalg.solve(K, [u, v, 1.0]))  # noqa: E731  the point at depth z on pixel (u, v)
+    target = Pose(spec.target.R, at(width / 6, height / 6))
+    identity = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    length = 0.05 * width * z / K[0, 0]  # a twentieth of the width
+    truss = replace(spec.props[0], shape="truss", size=(length, length / 5, length / 5),
+                    pose=Pose(identity, at(5 * width / 6, 5 * height / 6)))  # fmt: skip
+    return replace(spec, target=target, props=(truss,))
+
+
 def sun_in_view(spec):
     """The sun just off the optical axis: its disc, ghosts and veiling glare over the whole image."""
     s = np.array([0.05, -0.03, 1.0])
@@ -45,6 +59,7 @@ CASES = {
     "occluder across the frame": occluder_across_the_frame,
     "sun glare": sun_in_view,
 }
+APART = {"objects apart": objects_apart}  # several regions: Blender traces each (Mitsuba one window)
 
 
 def rms_over_objects(a: np.ndarray, b: np.ndarray, instance: np.ndarray) -> float:

@@ -22,8 +22,8 @@ from scgen.render.blender.backend import BlenderBackend
 from scgen.render.blender.scene import border_fractions
 from scgen.render.blender.settings import QualityPreset, configure_beauty
 from scgen.render.conventions import CLIP_START_M
-from scgen.render.region import Region, covered_region, full_frame
-from tests.region_cases import CASES, OCCLUDED, partly_out_of_view, rms_over_objects
+from scgen.render.region import Region, covered_region, covered_regions, full_frame, paste
+from tests.region_cases import APART, CASES, OCCLUDED, partly_out_of_view, rms_over_objects
 
 SIZE = (160, 120)
 LABELS = ("depth", "instance", "target_depth", "normal", "sun_blocked")
@@ -50,6 +50,36 @@ def test_region_is_the_whole_frame_when_an_object_reaches_the_near_plane_or_noth
     assert covered_region(K, *SIZE, [outside], 0.75, 0) == full_frame(*SIZE)
 
 
+def test_objects_apart_get_a_region_each_and_overlapping_ones_share_one():
+    left, right = np.array([[-0.5, 0.0, 1.0], [-0.4, 0.1, 1.0]]), np.array([[0.4, 0.0, 1.0], [0.5, 0.1, 1.0]])
+    own = [covered_region(K, *SIZE, [points], 0.75, 5) for points in (left, right)]
+    assert covered_regions(K, *SIZE, [left, right], 0.75, 5) == tuple(own)  # pixels 30..40 and 120..130
+    near_left = left + [0.08, 0.0, 0.0]  # 8 px to the right: the widened boxes overlap
+    assert covered_regions(K, *SIZE, [left, near_left], 0.75, 5) == (
+        covered_region(K, *SIZE, [left, near_left], 0.75, 5),
+    )
+    outside = np.array([[10.0, 0.0, 1.0]])
+    assert covered_regions(K, *SIZE, [left, outside], 0.75, 5) == (own[0],)
+    near = np.array([[0.0, 0.0, CLIP_START_M / 2]])
+    assert covered_regions(K, *SIZE, [left, near], 0.75, 5) == (full_frame(*SIZE),)
+
+
+def test_regions_are_disjoint_hold_each_object_and_span_what_one_region_spans():
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        centres = rng.uniform([-0.7, -0.5, 1.0], [0.7, 0.5, 1.0], (rng.integers(1, 6), 3))
+        objects = [c + rng.uniform(-0.1, 0.1, (4, 3)) * [1, 1, 0] for c in centres]  # in view, 1 m away
+        regions = covered_regions(K, *SIZE, objects, 0.75, 4)
+        assert all(not a.overlaps(b) for i, a in enumerate(regions) for b in regions[i + 1 :])
+        for points in objects:
+            own = covered_region(K, *SIZE, [points], 0.75, 4)
+            assert any(r.around(own) == r for r in regions)  # inside one of them
+        box = regions[0]
+        for r in regions[1:]:
+            box = box.around(r)
+        assert box == covered_region(K, *SIZE, objects, 0.75, 4)
+
+
 @pytest.mark.parametrize("size", [64, 120, 160, 480, 640, 1200, 1920, 4096, 8192])
 def test_border_fractions_give_every_pixel_edge_exactly(size):
     """Blender takes a border edge as int(fraction * size), in float32: every edge of every region
@@ -72,34 +102,36 @@ def draft(generator):
     backend.close()
 
 
-def both(backend: BlenderBackend, spec) -> tuple[Buffers, Buffers, object]:
-    """(full frame, region, the region) of one spec."""
+def both(backend: BlenderBackend, spec) -> tuple[Buffers, Buffers, tuple[Region, ...]]:
+    """(full frame, regions, the regions traced) of one spec."""
     backend.trace_region = False
     full = backend.render(spec)
     backend.trace_region = True
     region = backend.render(spec)
-    return full, region, backend.scene.region
+    return full, region, backend.scene.regions
 
 
-@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("case", list(CASES | APART))
 def test_without_a_denoiser_the_region_render_is_the_full_frame_byte_for_byte(generator, draft, case):
-    spec = CASES[case](generator.scene(0))
+    spec = (CASES | APART)[case](generator.scene(0))
     full, region, traced = both(draft, spec)
-    assert not traced.full
+    assert not any(r.full for r in traced)
     for name in LABELS:
         assert np.array_equal(getattr(full, name), getattr(region, name)), name
     assert np.array_equal(full.rgb, region.rgb)
     assert full.camera == region.camera
-    hit = np.nonzero(full.instance)
-    assert hit[0].size and traced.window[0].start <= hit[0].min() and hit[0].max() < traced.window[0].stop
-    assert traced.window[1].start <= hit[1].min() and hit[1].max() < traced.window[1].stop
+    inside = paste(traced, [np.ones((r.y1 - r.y0, r.x1 - r.x0), bool) for r in traced], False)
+    assert full.instance.any() and inside[full.instance > 0].all()  # every object pixel was traced
     if case == "partly out of view":
-        assert traced.x0 == 0 and (full.instance[:, 0] == 1).any()
+        assert min(r.x0 for r in traced) == 0 and (full.instance[:, 0] == 1).any()
     if case == "occluder across the frame":
-        assert (traced.x0, traced.x1) == (0, SIZE[0]) and not traced.full
+        assert any((r.x0, r.x1) == (0, SIZE[0]) for r in traced)
         assert (full.instance[:, 0] == 2).any() and (full.instance[:, -1] == 2).any()
     if case == "sun glare":
         assert full.camera.flare
+    if case == "objects apart":
+        assert len(traced) == 2 and not inside.all(axis=1).any()  # two, with untraced pixels in every row
+        assert {int(full.instance[r.window].max()) for r in traced} == {1, 2}  # one object in each
 
 
 def test_denoised_region_render_keeps_the_labels_and_the_presets_quality(generator):
@@ -112,7 +144,7 @@ def test_denoised_region_render_keeps_the_labels_and_the_presets_quality(generat
         reference = backend.render(spec)
     finally:
         backend.close()
-    assert not traced.full
+    assert not any(r.full for r in traced)
     for name in LABELS:
         assert np.array_equal(getattr(full, name), getattr(region, name)), name
     moved = rms_over_objects(region.rgb, full.rgb, full.instance)

@@ -1,18 +1,20 @@
-"""The part of the frame a render must trace: the box around every object's projection.
+"""The part of the frame a render must trace: the boxes around the objects' projections.
 
 The backends render only the target and the props over a transparent film; the sky, the Earth and the
 camera stage's glare and blur are added afterwards in numpy over the full frame. So a pixel whose
 samples all miss every object renders as exactly zero (colour, alpha, albedo, normal), and tracing it
 only costs time. `covered_region` bounds the pixels any sample can reach an object from: the union of
 the objects' projected boxes (convex hulls, so every surface point lies inside), widened by the pixel
-filter's reach and a margin for the denoiser's neighbourhood.
+filter's reach and a margin for the denoiser's neighbourhood; `covered_regions` bounds the same pixels
+as disjoint boxes, one per object or group of overlapping objects, for a renderer that can trace several
+(Blender: one border per render call; Mitsuba compiles its film's size, so it traces one window).
 """
 
 from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,11 +57,32 @@ class Region:
         """The fraction of the frame's pixels inside."""
         return (self.x1 - self.x0) * (self.y1 - self.y0) / (self.width * self.height)
 
+    def overlaps(self, other: Region) -> bool:
+        """Whether the two share a pixel."""
+        return self.x0 < other.x1 and other.x0 < self.x1 and self.y0 < other.y1 and other.y0 < self.y1
+
+    def around(self, other: Region) -> Region:
+        """The smallest region holding both."""
+        return Region(min(self.x0, other.x0), min(self.y0, other.y0), max(self.x1, other.x1),
+                      max(self.y1, other.y1), self.width, self.height)  # fmt: skip
+
     def paste(self, crop: np.ndarray, fill: float) -> np.ndarray:
         """The full frame holding `crop` (the region's pixels) and `fill` elsewhere."""
-        frame = np.full((self.height, self.width, *crop.shape[2:]), fill, crop.dtype)
-        frame[self.window] = crop
-        return frame
+        return paste((self,), (crop,), fill)
+
+
+def paste(regions: Sequence[Region], crops: Sequence[np.ndarray], fill: float) -> np.ndarray:
+    """The full frame holding each crop in its region (disjoint regions of one frame), `fill` elsewhere."""
+    first = regions[0]
+    frame = np.full((first.height, first.width, *crops[0].shape[2:]), fill, crops[0].dtype)
+    for region, crop in zip(regions, crops, strict=True):
+        frame[region.window] = crop
+    return frame
+
+
+def traced_share(regions: Iterable[Region]) -> float:
+    """The fraction of the frame's pixels inside disjoint `regions`."""
+    return sum(r.share for r in regions)
 
 
 def full_frame(width: int, height: int) -> Region:
@@ -78,29 +101,83 @@ def covered_region(
     camera, where its projected box bounds nothing: the whole frame then. No object in view: the whole
     frame too (a renderer cannot render an empty region, and the case is too rare to save anything).
     """
-    lo, hi = np.array([np.inf, np.inf]), np.array([-np.inf, -np.inf])
+    boxes = projected_boxes(K, objects)
+    if boxes is None or not boxes:
+        return full_frame(width, height)
+    lo, hi = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+    return widened(lo, hi, reach_px, margin_px, width, height) or full_frame(width, height)
+
+
+def covered_regions(
+    K: np.ndarray, width: int, height: int, objects: Iterable[np.ndarray], reach_px: float, margin_px: int
+) -> tuple[Region, ...]:
+    """The pixels whose samples may meet one of `objects`, as covered_region's, but as disjoint regions:
+    each object's own widened box, boxes that overlap merged into the box around both until none do. Far-apart objects (a target and an occluder
+    at the other side of the frame) so leave the empty pixels between them untraced. The same whole-frame
+    cases as covered_region; an object out of view adds nothing."""
+    boxes = projected_boxes(K, objects)
+    if boxes is None:
+        return (full_frame(width, height),)
+    regions = [r for lo, hi in boxes if (r := widened(lo, hi, reach_px, margin_px, width, height))]
+    return disjoint(regions) if regions else (full_frame(width, height),)
+
+
+def projected_boxes(
+    K: np.ndarray, objects: Iterable[np.ndarray]
+) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """Each non-empty object's projected box, (min (u, v), max (u, v)); None when an object reaches the
+    near clip plane (its projection may wrap around the camera and bound nothing)."""
+    boxes = []
     for points in objects:
         if len(points) == 0:
             continue
         if points[:, 2].min() <= CLIP_START_M:
-            return full_frame(width, height)
+            return None
         uv = project(K, points)
-        lo, hi = np.minimum(lo, uv.min(axis=0)), np.maximum(hi, uv.max(axis=0))
-    if not np.all(hi >= lo):
-        return full_frame(width, height)
+        boxes.append((uv.min(axis=0), uv.max(axis=0)))
+    return boxes
+
+
+def widened(
+    lo: np.ndarray, hi: np.ndarray, reach_px: float, margin_px: int, width: int, height: int
+) -> Region | None:
+    """The pixels whose centre lies within reach_px of the box [lo, hi], margin_px more on each side,
+    inside the frame; None when none of them is."""
     first = [math.ceil(v - reach_px) - margin_px for v in lo]
     last = [math.floor(v + reach_px) + margin_px for v in hi]  # inclusive
     x0, y0 = max(0, first[0]), max(0, first[1])
     x1, y1 = min(width, last[0] + 1), min(height, last[1] + 1)
     if x1 <= x0 or y1 <= y0:
-        return full_frame(width, height)
+        return None
     return Region(x0, y0, x1, y1, width, height)
 
 
-def scene_region(spec: SceneSpec, hull: np.ndarray, reach_px: float, margin_px: int) -> Region:
-    """covered_region of `spec`'s camera (the one rendered) around its target, given as `hull` (the
-    vertices of the model's convex hull, model frame), and its props' meshes."""
-    cam = spec.camera
+def disjoint(regions: list[Region]) -> tuple[Region, ...]:
+    """`regions` with every overlapping pair replaced by the box around both, until no two overlap."""
+    merged = list(regions)
+    while True:
+        pair = next(((i, j) for i in range(len(merged)) for j in range(i + 1, len(merged))
+                     if merged[i].overlaps(merged[j])), None)  # fmt: skip
+        if pair is None:
+            return tuple(merged)
+        b = merged.pop(pair[1])
+        merged[pair[0]] = merged[pair[0]].around(b)
+
+
+def scene_objects(spec: SceneSpec, hull: np.ndarray) -> list[np.ndarray]:
+    """`spec`'s objects in its camera frame: the target, given as `hull` (the vertices of the model's
+    convex hull, model frame), then each prop's mesh."""
     target = hull @ spec.target.R_mat.T + spec.target.t_vec
-    objects = [target, *(np.asarray(prop_mesh(p).vertices) for p in spec.props)]
-    return covered_region(cam.K_mat, cam.width, cam.height, objects, reach_px, margin_px)
+    return [target, *(np.asarray(prop_mesh(p).vertices) for p in spec.props)]
+
+
+def scene_region(spec: SceneSpec, hull: np.ndarray, reach_px: float, margin_px: int) -> Region:
+    """covered_region of `spec`'s camera (the one rendered) around its objects (scene_objects)."""
+    cam = spec.camera
+    return covered_region(cam.K_mat, cam.width, cam.height, scene_objects(spec, hull), reach_px, margin_px)
+
+
+def scene_regions(spec: SceneSpec, hull: np.ndarray, reach_px: float, margin_px: int) -> tuple[Region, ...]:
+    """covered_regions of `spec`'s camera around its objects (scene_objects)."""
+    cam = spec.camera
+    return covered_regions(cam.K_mat, cam.width, cam.height, scene_objects(spec, hull), reach_px, margin_px)

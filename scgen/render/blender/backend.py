@@ -3,7 +3,7 @@
 Per sample: update the persistent scenes in place (scene), render the anti-aliased beauty
 image (RGB + depth + object index from the centred first sample), then a one-sample aux render
 (normals, sun visibility, target-alone depth), and turn the passes into Buffers (pure numpy). Both
-renders trace only the region the objects may cover (scgen.render.region): outside it every pass is
+renders trace only the regions the objects may cover (scgen.render.region): outside them every pass is
 what a pixel that meets nothing gives, so labels and the undenoised image are the full frame's exactly.
 bpy is imported only when a backend is made, so scgen works without it for other backends.
 """
@@ -24,7 +24,7 @@ from scgen.render.blender.env import import_bpy, select_device
 from scgen.render.blender.scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender.settings import FILTER_WIDTH_PX, preset
 from scgen.render.camera import record_image, render_camera
-from scgen.render.region import Region, full_frame, region_render, scene_region
+from scgen.render.region import Region, full_frame, region_render, scene_regions
 from scgen.render.sky.backgrounds import background_image
 from scgen.scenes.geometry import project
 from scgen.scenes.model import TargetModel
@@ -51,7 +51,7 @@ class BlenderBackend:
         region: bool | None = None,
     ) -> None:
         """`device`: auto (a GPU when Cycles finds one), cpu or gpu; `threads`: CPU threads (None: all);
-        `region`: trace only the pixels the objects may cover (covered_region), else the whole frame
+        `region`: trace only the pixels the objects may cover (covered_regions), else the whole frame
         (None: as region_render() says)."""
         quality_preset = preset(quality)
         self._bpy = import_bpy()
@@ -74,7 +74,7 @@ class BlenderBackend:
     def render(self, spec: SceneSpec) -> Buffers:
         shown = replace(spec, camera=render_camera(spec.camera))
         self.scene.update(shown)
-        self.scene.set_region(self.region(shown))
+        self.scene.set_regions(self.regions(shown))
         beauty = self.scene.render_beauty()
         if shown.camera == spec.camera:  # not `is`: render_camera's cache returns an equal camera of before
             instance, depth = instance_and_depth(beauty)
@@ -86,11 +86,11 @@ class BlenderBackend:
         buffers.rgb, buffers.camera = record_image(spec, image, buffers.instance)
         return buffers
 
-    def region(self, spec: SceneSpec) -> Region:
-        """The part of `spec`'s frame Cycles traces: around the target's hull and the props' meshes."""
+    def regions(self, spec: SceneSpec) -> tuple[Region, ...]:
+        """The parts of `spec`'s frame Cycles traces: around the target's hull and the props' meshes."""
         if not self.trace_region:
-            return full_frame(spec.camera.width, spec.camera.height)
-        return scene_region(spec, self._hull, FILTER_WIDTH_PX / 2, DENOISE_MARGIN_PX)
+            return (full_frame(spec.camera.width, spec.camera.height),)
+        return scene_regions(spec, self._hull, FILTER_WIDTH_PX / 2, DENOISE_MARGIN_PX)
 
     def _ray_caster(self) -> MitsubaBackend:
         """The Mitsuba backend's exact geometric passes, made on first need (cameras with a lens)."""

@@ -38,7 +38,7 @@ from scgen.render.blender.settings import (
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, render_seed
 from scgen.render.lighting import body_albedo_light, sun_render_irradiance
 from scgen.render.props import prop_mesh
-from scgen.render.region import Region, full_frame
+from scgen.render.region import Region, full_frame, paste
 from scgen.scenes.finish import finished
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import CameraSpec, PropSpec, SceneSpec
@@ -110,7 +110,7 @@ class BlenderScene:
         self.alone.layer_collection.children[self.props_coll.name].exclude = True
         probe.material_override = self.alone.material_override = override
         self._camera_key: tuple | None = None
-        self.region = full_frame(1, 1)
+        self.regions: tuple[Region, ...] = (full_frame(1, 1),)
         self.cycles_s = 0.0  # time inside bpy.ops.render.render, for benchmarks
 
     def update(self, spec: SceneSpec) -> None:
@@ -122,15 +122,18 @@ class BlenderScene:
         self._set_finish(spec.finish)
         self.beauty.cycles.seed = render_seed(spec)
 
-    def set_region(self, region: Region) -> None:
-        """Trace only `region` of the frame in both scenes (Cycles' border, cropped); the passes read back
-        are the full frame all the same, every pixel outside as a pixel that meets nothing renders."""
-        for scene in (self.beauty, self.aux):
-            r = scene.render
-            r.use_border = r.use_crop_to_border = not region.full
-            if not region.full:
-                r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = border_fractions(region)
-        self.region = region
+    def set_regions(self, regions: tuple[Region, ...]) -> None:
+        """Trace only `regions` (disjoint) of the frame in both scenes, each with a render call of its own
+        (Cycles' border, cropped); the passes read back are the full frame all the same, every pixel
+        outside as a pixel that meets nothing renders."""
+        self.regions = regions
+
+    @staticmethod
+    def _set_border(scene: Any, region: Region) -> None:
+        r = scene.render
+        r.use_border = r.use_crop_to_border = not region.full
+        if not region.full:
+            r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = border_fractions(region)
 
     def render_beauty(self) -> dict[str, np.ndarray]:
         return self._render(self.beauty, self.beauty_exr)
@@ -141,17 +144,25 @@ class BlenderScene:
         return self._render(self.aux, self.aux_exr)
 
     def _render(self, scene: Any, path: Path) -> dict[str, np.ndarray]:
-        """Render `scene` to its EXR and read it back: {'layer.Pass.C': H x W float32}, row 0 at the top."""
+        """Render `scene`'s regions to its EXR and read them back: {'layer.Pass.C': H x W float32}, row 0
+        at the top, the full frame."""
+        crops = []
+        for region in self.regions:
+            self._set_border(scene, region)
+            crops.append(self._render_call(scene, path))
+        if len(self.regions) == 1 and self.regions[0].full:
+            return crops[0]
+        fill = {name: MISS_DEPTH if name.endswith("Depth.Z") else 0.0 for name in crops[0]}
+        return {name: paste(self.regions, [c[name] for c in crops], fill[name]) for name in crops[0]}
+
+    def _render_call(self, scene: Any, path: Path) -> dict[str, np.ndarray]:
+        """One render of `scene` as its border stands, read back from its EXR."""
         t = time.perf_counter()
         with quiet_stdout():
             self._bpy.ops.render.render(write_still=True, scene=scene.name)
         self.cycles_s += time.perf_counter() - t
         with OpenEXR.File(str(path), separate_channels=True) as f:
-            passes = {name: ch.pixels for part in f.parts for name, ch in part.channels.items()}
-        if self.region.full:
-            return passes
-        return {name: self.region.paste(px, MISS_DEPTH if name.endswith("Depth.Z") else 0.0)
-                for name, px in passes.items()}  # fmt: skip
+            return {name: ch.pixels for part in f.parts for name, ch in part.channels.items()}
 
     def _target_object(self, model: TargetModel) -> Any:
         """One mesh object for the whole target, one material slot per material class in use."""
