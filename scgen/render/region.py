@@ -112,9 +112,10 @@ def covered_regions(
     K: np.ndarray, width: int, height: int, objects: Iterable[np.ndarray], reach_px: float, margin_px: int
 ) -> tuple[Region, ...]:
     """The pixels whose samples may meet one of `objects`, as covered_region's, but as disjoint regions:
-    each object's own widened box, boxes that overlap merged into the box around both until none do. Far-apart objects (a target and an occluder
-    at the other side of the frame) so leave the empty pixels between them untraced. The same whole-frame
-    cases as covered_region; an object out of view adds nothing."""
+    each object's own widened box, boxes that overlap merged into the box around both until none do.
+    Far-apart objects (a target and an occluder at the other side of the frame) so leave the empty pixels
+    between them untraced. The same whole-frame cases as covered_region; an object out of view adds
+    nothing."""
     boxes = projected_boxes(K, objects)
     if boxes is None:
         return (full_frame(width, height),)
