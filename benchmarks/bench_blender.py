@@ -10,7 +10,7 @@ then `--naive-frames` of the same scenes with a backend rebuilt for every frame;
 presets in both modes against a many-sample full-frame reference (PSNR over the rendered objects, so the
 composited background does not inflate it); then, with `--settings-frames`, Cycles settings (samples,
 adaptive sampling, the denoiser's inputs) tried one at a time on the default preset against the same
-reference.
+reference; with `--margin-frames`, the empty pixels traced around each box for the denoiser.
 
     .venv/bin/python benchmarks/bench_blender.py                      # profile, 30 frames, naive, presets
     .venv/bin/python benchmarks/bench_blender.py --frames 300 --naive-frames 0 --preset-frames 0
@@ -34,8 +34,8 @@ from scgen import Generator
 from scgen.annotate import annotate
 from scgen.dataset.layout import Layout
 from scgen.dataset.writer import WriteOptions, write_sample
-from scgen.render.blender.backend import DENOISE_MARGIN_PX, BlenderBackend
-from scgen.render.blender.settings import FILTER_WIDTH_PX, PRESETS, QualityPreset, configure_beauty
+from scgen.render.blender.backend import BlenderBackend
+from scgen.render.blender.settings import FILTER_REACH_PX, PRESETS, QualityPreset, configure_beauty
 from scgen.render.region import full_frame, scene_region, traced_share
 from scgen.run.runner import write_static_files
 from scgen.scenes import load_config
@@ -50,6 +50,8 @@ def rss_mb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
+ONE_BOX_MARGIN_PX = 16  # the one-box region path's margin for the denoiser (until the margin was measured)
+MARGINS_PX = (16, 8, 4, 0)  # --margin-frames: empty pixels traced around each box for the denoiser
 MODES = {"full frame": False, "region": True}  # BlenderBackend.trace_region: the old path, then the new
 
 
@@ -95,10 +97,11 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
     stamps: list[tuple[float, str]] = []
     bpy.app.handlers.render_stats.append(lambda stats: stamps.append((time.perf_counter(), stats)))
     hull = np.asarray(generator.model.mesh.convex_hull.vertices, np.float64)
-    paths = {  # what each path traces: the whole frame, one box around every object (the region path
-        # before 2026-11-28, Mitsuba's still), a box per object or group of overlapping objects (now)
+    paths = {  # what each path traces: the whole frame, one box around every object with 16 px for the
+        # denoiser (the region path from f325401 to c91b707; Mitsuba's, without the margin), a box per object
+        # or group of overlapping objects (now)
         "full frame": lambda spec: (full_frame(spec.camera.width, spec.camera.height),),
-        "one box": lambda spec: (scene_region(spec, hull, FILTER_WIDTH_PX / 2, DENOISE_MARGIN_PX),),
+        "one box": lambda spec: (scene_region(spec, hull, FILTER_REACH_PX, ONE_BOX_MARGIN_PX),),
         "regions": backend.regions,
     }
     times: dict[str, dict[str, list[float]]] = {m: {} for m in paths}
@@ -262,6 +265,27 @@ def settings_run(model: TargetModel, specs: list[SceneSpec], refs: list, threads
     return rows
 
 
+def margin_run(model: TargetModel, specs: list[SceneSpec], refs: list) -> list[tuple]:
+    """(margin in px, seconds per render, mean PSNR against the references, mean share of the frame
+    traced) for the full frame (margin None) and each of MARGINS_PX, the margins in turn on each scene."""
+    backend = BlenderBackend(model)
+    backend.render(specs[0])  # warm-up: first sync and kernel load
+    margins = (None, *MARGINS_PX)
+    runs: dict = {m: ([], [], []) for m in margins}
+    for spec, ref in zip(specs, refs, strict=True):
+        for margin in margins:
+            backend.trace_region = margin is not None
+            backend.margin_px = margin or 0
+            t0 = time.perf_counter()
+            buffers = backend.render(spec)
+            seconds, psnrs, shares = runs[margin]
+            seconds.append(time.perf_counter() - t0)
+            psnrs.append(foreground_psnr(buffers.rgb, ref.rgb, ref.instance))
+            shares.append(traced_share(backend.scene.regions))
+    backend.close()
+    return [(m, *(statistics.mean(v) for v in runs[m])) for m in margins]
+
+
 def report_persistent(runs: dict[str, dict], frames: int) -> None:
     """The modes side by side: seconds per annotated sample (render, annotate, write) and what they give."""
     names, mean, median = list(runs), statistics.mean, statistics.median
@@ -301,6 +325,7 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--preset-frames", type=int, default=3)
     ap.add_argument("--settings-frames", type=int, default=0, help="scenes for the Cycles settings sweep")
     ap.add_argument("--settings-threads", type=int, default=1, help="render threads in the settings sweep")
+    ap.add_argument("--margin-frames", type=int, default=0, help="scenes for the denoiser-margin sweep")
     ap.add_argument("--ref-samples", type=int, default=1024)
     ap.add_argument("--quality", default="default", choices=list(PRESETS))
     ap.add_argument("--resolution", type=int, nargs=2, default=(640, 480), metavar=("W", "H"))
@@ -312,7 +337,8 @@ def run(args: argparse.Namespace) -> None:
 
     model = load_target()
     cfg = load_config(resolution=tuple(args.resolution))
-    n = max(args.frames, args.naive_frames, args.preset_frames, args.settings_frames, args.profile)
+    n = max(args.frames, args.naive_frames, args.preset_frames, args.settings_frames, args.margin_frames,
+            args.profile)  # fmt: skip
     generator = Generator(model, cfg, args.seed)
     specs = [generator.scene(i) for i in range(n)]
     width, height = args.resolution
@@ -346,6 +372,16 @@ def run(args: argparse.Namespace) -> None:
         print(f"  {'settings':42s} {'s/render':>9s} {'PSNR dB':>8s}")
         for name, s, psnr in settings_run(model, chosen, refs, args.settings_threads):
             print(f"  {name:42s} {s:9.3f} {psnr:8.2f}")
+
+    if args.margin_frames:
+        chosen = specs[: args.margin_frames]
+        refs = references(model, chosen, args.ref_samples)
+        print(f"\ndenoiser margin around each box, default preset, vs a {args.ref_samples}-spp reference, "
+              f"{args.margin_frames} scenes, the margins in turn:")  # fmt: skip
+        print(f"  {'margin':>12s} {'s/render':>9s} {'PSNR dB':>8s} {'traced':>7s}")
+        for margin, s, psnr, share in margin_run(model, chosen, refs):
+            label = "full frame" if margin is None else f"{margin} px"
+            print(f"  {label:>12s} {s:9.3f} {psnr:8.2f} {100 * share:6.1f}%")
 
 
 if __name__ == "__main__":

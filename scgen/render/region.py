@@ -5,9 +5,10 @@ camera stage's glare and blur are added afterwards in numpy over the full frame.
 samples all miss every object renders as exactly zero (colour, alpha, albedo, normal), and tracing it
 only costs time. `covered_region` bounds the pixels any sample can reach an object from: the union of
 the objects' projected boxes (convex hulls, so every surface point lies inside), widened by the pixel
-filter's reach and a margin for the denoiser's neighbourhood; `covered_regions` bounds the same pixels
-as disjoint boxes, one per object or group of overlapping objects, for a renderer that can trace several
-(Blender: one border per render call; Mitsuba compiles its film's size, so it traces one window).
+filter's reach and a margin (a denoiser's view of the objects' surroundings, where a backend wants one;
+Blender's measured none); `covered_regions` bounds the same pixels as disjoint boxes, one per object or
+group of overlapping objects, for a renderer that can trace several (Blender: one border per render
+call; Mitsuba compiles its film's size, so it traces one window).
 """
 
 from __future__ import annotations
@@ -95,7 +96,7 @@ def covered_region(
     """The pixels whose samples may meet one of `objects` (camera-frame points, N x 3, each an object's
     convex hull's vertices, or any points whose hull holds the object), and `margin_px` more on each side.
 
-    A pixel's samples land within `reach_px` of its centre (the pixel filter's half-width; integer
+    A pixel's samples land within `reach_px` of its centre (the pixel filter's reach; integer
     (u, v) is a pixel centre), so the pixels reached are those whose centre lies within reach_px of an
     object's projected box. An object with a point nearer than the near clip plane may wrap around the
     camera, where its projected box bounds nothing: the whole frame then. No object in view: the whole

@@ -37,7 +37,12 @@ PRESETS = {
     "default": QualityPreset(16, 0.02, 3, 1, 2, denoise_quality="FAST"),  # BlenderProc's BOP sample count
     "high": QualityPreset(64, 0.01, 4, 2, 2, denoise_quality="BALANCED"),
 }
-FILTER_WIDTH_PX = 1.5  # the beauty render's Blackman-Harris filter: samples land within 0.75 px of a centre
+FILTER_WIDTH_PX = 1.5  # the beauty render's Blackman-Harris filter width
+# How far from its pixel's centre a sample lands: the whole width, not half of it. Cycles builds a
+# Blackman-Harris filter's importance table over twice the width it is given (scene/film.cpp,
+# filter_table: `width *= 2.0f`), so samples reach +-1.5 px; seen in a render, a pixel 1.16 px from a
+# truss's projected box took a sample from it (tests/test_blender_region.py, the occluder case)
+FILTER_REACH_PX = FILTER_WIDTH_PX
 SUN_ANGLE_RAD = 0.00925  # 0.53 degrees: the Sun's disc at 1 AU, so shadows stay hard
 
 
