@@ -15,7 +15,7 @@ Prints, and writes to OUT/full_count.json (with the RSS trace in OUT/full_count_
 A run interrupted by anything resumes with the same command (render skips complete samples).
 
 Usage: python benchmarks/full_count.py --out DIR [--n 50000] [--backend mitsuba] [--resolution 64x48]
-       [--workers 2] [--seed 0] [--blender-core-s 2.72]
+       [--workers 2] [--seed 0] [--blender-core-s 2.64]
 """
 
 from __future__ import annotations
@@ -44,8 +44,9 @@ from scgen.run.runner import RenderJob, run_render
 
 MB = 1024 * 1024
 FULL_SIZE = (640, 480)  # the cost model's image size
-# 2 workers x 1 thread at 640x480, default quality: 0.735 img/s steady (docs/scale-out.md's worker table)
-BLENDER_CORE_S = 2 / 0.735
+# 2 workers x 1 thread at 640x480, default quality, a box per object traced: 0.759 img/s steady
+# (docs/scale-out.md, bench_workers.py --backend blender --n 24 --runs 2x1 --repeat 2, 2026-11-28)
+BLENDER_CORE_S = 2 / 0.759
 
 
 class RssTrace(threading.Thread):
