@@ -145,7 +145,7 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
                 beauty_stages = cycles_stages(t0, time.perf_counter())
                 stamps.clear()
                 instance, depth = blender_backend.instance_and_depth(beauty)
-                alone = blender_backend.props_may_hide_target(spec, backend._hull, instance, depth)
+                alone = blender_backend.props_may_hide_target(spec, hull, instance, depth)
                 aux = timed("aux render (labels)", mode, scene.render_aux, alone)
                 buffers = timed("label passes", mode, blender_backend.buffers_from_passes, spec, beauty, aux)
                 background = timed("background", mode, blender_backend.background_image, spec)
@@ -199,6 +199,14 @@ def foreground_psnr(rgb: np.ndarray, ref: np.ndarray, instance: np.ndarray) -> f
     return float(10 * np.log10(255.0**2 / max(1e-12, float(np.mean(err**2)))))
 
 
+def scored_render(backend: BlenderBackend, spec: SceneSpec, ref) -> tuple[float, float]:
+    """(seconds, PSNR over the objects against `ref`) of one render of `spec`."""
+    t0 = time.perf_counter()
+    buffers = backend.render(spec)
+    seconds = time.perf_counter() - t0
+    return seconds, foreground_psnr(buffers.rgb, ref.rgb, ref.instance)
+
+
 def references(model: TargetModel, specs: list[SceneSpec], ref_samples: int) -> list:
     """Each spec rendered full frame with `ref_samples` samples, no denoiser: the quality reference."""
     backend = BlenderBackend(model, region=False)
@@ -220,10 +228,9 @@ def preset_run(model: TargetModel, specs: list[SceneSpec], refs: list) -> list[t
         for spec, ref in zip(specs, refs, strict=True):
             for mode, trace_region in MODES.items():
                 backend.trace_region = trace_region
-                t0 = time.perf_counter()
-                buffers = backend.render(spec)
-                times[mode].append(time.perf_counter() - t0)
-                psnrs[mode].append(foreground_psnr(buffers.rgb, ref.rgb, ref.instance))
+                seconds, psnr = scored_render(backend, spec, ref)
+                times[mode].append(seconds)
+                psnrs[mode].append(psnr)
         backend.close()
         rows += [(name, m, statistics.mean(times[m]), statistics.mean(psnrs[m])) for m in MODES]
     return rows
@@ -256,10 +263,9 @@ def settings_run(model: TargetModel, specs: list[SceneSpec], refs: list, threads
         backend.render(specs[0])  # warm-up: first sync and kernel load
         times, psnrs = [], []
         for spec, ref in zip(specs, refs, strict=True):
-            t0 = time.perf_counter()
-            buffers = backend.render(spec)
-            times.append(time.perf_counter() - t0)
-            psnrs.append(foreground_psnr(buffers.rgb, ref.rgb, ref.instance))
+            seconds, psnr = scored_render(backend, spec, ref)
+            times.append(seconds)
+            psnrs.append(psnr)
         backend.close()
         rows.append((name, statistics.mean(times), statistics.mean(psnrs)))
     return rows
@@ -276,11 +282,10 @@ def margin_run(model: TargetModel, specs: list[SceneSpec], refs: list) -> list[t
         for margin in margins:
             backend.trace_region = margin is not None
             backend.margin_px = margin or 0
-            t0 = time.perf_counter()
-            buffers = backend.render(spec)
-            seconds, psnrs, shares = runs[margin]
-            seconds.append(time.perf_counter() - t0)
-            psnrs.append(foreground_psnr(buffers.rgb, ref.rgb, ref.instance))
+            seconds, psnr = scored_render(backend, spec, ref)
+            times, psnrs, shares = runs[margin]
+            times.append(seconds)
+            psnrs.append(psnr)
             shares.append(traced_share(backend.scene.regions))
     backend.close()
     return [(m, *(statistics.mean(v) for v in runs[m])) for m in margins]
