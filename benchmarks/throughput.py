@@ -4,7 +4,7 @@ Stages, each written to --json as soon as it is measured (a killed run keeps wha
   1. loader: training samples/s of one process, then of a DataLoader with --workers processes (the
      paper's augmentations at 256/64, as benchmarks/posenet_dataloader.py measures them);
   2. train step of --config (or each --variant), random init, in training's precision and memory format:
-     the step as posenet trains it (foreach Ranger, losses read back every log_every steps) and, on a
+     the step as posenet trains it (fused Ranger, losses read back every log_every steps) and, on a
      CPU, 3a10b4b's step beside it (timm's Lookahead(RAdam), every step's losses read back at once),
      timed in alternating blocks in one process, with their ratio; on CUDA the step captured
      (torch.compile mode="reduce-overhead": CUDA graphs) beside the eager one. Printed as
@@ -113,7 +113,7 @@ def fresh_model(cfg: TrainConfig, device: torch.device) -> torch.nn.Module:
 
 
 def eager_step(cfg: TrainConfig, batch: dict, pm: PmObject, precision: Precision, old: bool) -> Step:
-    """posenet's step (foreach Ranger; the losses stay on the device) or 3a10b4b's (timm's optimizer,
+    """posenet's step (fused Ranger; the losses stay on the device) or 3a10b4b's (timm's optimizer,
     every step's losses read back to the host, as its training loop did)."""
     model = fresh_model(cfg, batch["roi_img"].device)
     opt = timm_optimizer(model, cfg) if old else make_optimizer(model, cfg.optim, 10**6)[0]
@@ -129,7 +129,7 @@ def eager_step(cfg: TrainConfig, batch: dict, pm: PmObject, precision: Precision
 
 def captured_step(cfg: TrainConfig, batch: dict, pm: PmObject, precision: Precision) -> Step:
     """The step with forward and losses (and through AOTAutograd the backward) compiled with
-    mode="reduce-overhead", which records them as CUDA graphs and replays them; the foreach optimizer
+    mode="reduce-overhead", which records them as CUDA graphs and replays them; the fused optimizer
     runs eagerly after. Shapes are fixed (one batch), so the graphs are recorded once."""
     model = fresh_model(cfg, batch["roi_img"].device)
     opt, _ = make_optimizer(model, cfg.optim, 10**6)
@@ -189,7 +189,7 @@ def optimizer_times(cfg: TrainConfig, batch: dict, pm: PmObject, n: int) -> dict
     loss.backward()
     opts = {
         "timm (3a10b4b)": timm_optimizer(model, cfg),
-        "foreach Ranger": make_optimizer(model, cfg.optim, 1)[0],
+        "fused Ranger": make_optimizer(model, cfg.optim, 1)[0],
     }
     times: dict[str, list[float]] = {k: [] for k in opts}
     for _ in range(BLOCKS):

@@ -111,7 +111,7 @@ def checkpoint_due(step: int, o: OptimConfig, per_epoch: int) -> bool:
 def make_optimizer(
     model: torch.nn.Module, o: OptimConfig, total_iters: int | Callable[[], int]
 ) -> tuple[torch.optim.Optimizer, LambdaLR]:
-    """Ranger (posenet.training.ranger: RAdam + Lookahead on foreach kernels) and the per-iteration
+    """Ranger (posenet.training.ranger: RAdam + Lookahead as one fused Adam pass) and the per-iteration
     warmup + flat + cosine schedule over `total_iters` steps (a callable: read at every step, for a
     schedule fitted while it runs)."""
     # timm's no-decay group for biases and 1-d (norm) weights, unless they decay too (the groups timm's
