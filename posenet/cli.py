@@ -248,7 +248,10 @@ def eval_cmd(
 @click.option("--data", type=PATH, required=True, help="Dataset folder (train split trained, val selects).")
 @click.option("--out", type=PATH, required=True, help="Run folder: config.yaml, last.pt, best.pt, tb/.")
 @click.option(
-    "--config", "config", default=None, help="cpu (alias smoke) | paper | a YAML/TOML file  [default: cpu]"
+    "--config",
+    "config",
+    default=None,
+    help="cpu (alias smoke) | light (for frame rate) | paper | a YAML/TOML file  [default: cpu]",
 )
 @click.option("--max-steps", type=click.IntRange(min=1), default=None, help="Stop after N steps.")
 @minutes_option
@@ -264,7 +267,7 @@ def train_detector_cmd(
     obj_id: int | None,
 ) -> None:
     """Train the single-class target detector on the box the pose network is cropped around: FCOS on the
-    whole object's box clipped to the image (bbox_obj, amodal; the cpu and paper presets), or `arch:
+    whole object's box clipped to the image (bbox_obj, amodal; the cpu, light and paper presets), or `arch:
     mask-timm` on the object's mask (`mask`; the box is its extent). Backbones start from ImageNet
     (`pretrained:` imagenet, package, a local file or null)."""
     if config is None:

@@ -317,3 +317,22 @@ def test_minutes_fit_the_detector_schedule_to_the_budget(dataset_dir: Path, tmp_
                                     "--resume", "--minutes", "1"])  # fmt: skip
     assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1
     assert "--minutes fits a new run's whole schedule" in res.output
+
+
+def test_the_light_preset_runs_the_cpu_network_at_half_the_side_with_two_conv_heads() -> None:
+    """`--config light`: the cpu preset's FCOS at 160x120 with two conv layers a head branch (a third of
+    its time an image, docs/benchmarks.md); its checkpoint's config reloads to the same preset."""
+    light, cpu = load_detector_config("light"), load_detector_config("cpu")
+    assert detector_config_from_dict(light.to_dict()) == light
+    assert light.optim == cpu.optim and light.pretrained == cpu.pretrained
+    nets = {}
+    for name, cfg in (("light", light), ("cpu", cpu)):
+        net = build_detector(cfg.model_dict(), pretrained=None).eval()
+        sizes = []
+        net.backbone.register_forward_hook(lambda _m, args, _out, sizes=sizes: sizes.append(args[0].shape))
+        with torch.inference_mode():
+            net([torch.rand(3, 240, 320)])
+        convs = [m for m in net.head.classification_head.conv if isinstance(m, torch.nn.Conv2d)]
+        nets[name] = (tuple(sizes[0][-2:]), len(convs))
+    # torchvision's transform resizes to the short side min_size (long side <= max_size), padded to 32
+    assert nets == {"light": ((128, 160), 2), "cpu": ((256, 320), 4)}
