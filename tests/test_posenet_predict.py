@@ -338,6 +338,20 @@ def test_onnx_gives_torch_poses(user_folder: Path, pose_ckpt: Path, detector_ckp
     ):
         np.testing.assert_allclose(b["R"], a["R"], rtol=0, atol=bound.R)
         np.testing.assert_allclose(b["t"], a["t"], rtol=0, atol=bound.t * np.linalg.norm(a["t"]))
+    # the batched path runs the one-image detector graph on a batch's images side by side, one
+    # onnxruntime thread each: predict's one-at-a-time poses (its own sessions sum in another order)
+    camera = read_camera_file(user_folder / "camera.json")
+    on_torch = Predictor.load(pose_ckpt, detector_ckpt, min_score=0.0)
+    with rotation_outputs() as rot6d:
+        for frame in frames:
+            on_torch(frame, camera)
+    bound = _pose_rounding(pose_ckpt, rot6d, score, edge)
+    on_onnx = Predictor.load(pose_ckpt, det_onnx, onnx=pose_onnx, min_score=0.0)
+    one = [on_onnx(frame, camera) for frame in frames]
+    batched = BatchPredictor(on_onnx, 3, det_onnx)
+    for i, (a, b) in enumerate(zip(one, batched(frames, camera), strict=True)):
+        _same_pose(a, b, f"image {i}, onnxruntime batched", bound)
+    batched.close()
 
 
 def _write_video(path: Path, images: list[Path]) -> None:

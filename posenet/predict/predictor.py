@@ -178,8 +178,7 @@ class Predictor:
         """The detector's best box [x, y, w, h] and score in an image of the training camera, or None."""
         if self.detector is None:
             raise PosenetError("no detector loaded: give --detector, --box or --boxes")
-        found = self.detector(image[..., ::-1].astype(np.float32) / 255.0)
-        return None if found is None else detector_box(*found)
+        return detect_box(self.detector, image)
 
     def __call__(self, image: np.ndarray, camera: Camera | np.ndarray, box: Box | None = None) -> Pose:
         """The pose in `image` seen by `camera` (a Camera, or a 3x3 K for a pinhole camera), at `box`
@@ -241,6 +240,12 @@ class Predictor:
         return float(np.mean(error <= roi.scale / self.output_res))
 
 
+def detect_box(detector: Detector, image: np.ndarray) -> tuple[Box, float] | None:
+    """`detector`'s best box [x, y, w, h] and score in a BGR uint8 image, or None."""
+    found = detector(image[..., ::-1].astype(np.float32) / 255.0)
+    return None if found is None else detector_box(*found)
+
+
 def detector_box(edges: np.ndarray, score: float) -> tuple[Box, float]:
     """A detector's [x0, y0, x1, y1] pixel edges as a posenet box [x, y, w, h], covering pixels x .. x + w - 1
     (centres at integers), with its score."""
@@ -263,15 +268,17 @@ def onnx_network(path: Path, input_res: int) -> Network:
     return lambda roi_img, coord2d: run_onnx(session, roi_img.cpu(), coord2d.cpu())
 
 
-def load_box_detector(path: Path | None, camera: Camera, device: torch.device) -> Detector | None:
+def load_box_detector(
+    path: Path | None, camera: Camera, device: torch.device, threads: int | None = None
+) -> Detector | None:
     """A detector's best-box function: a checkpoint in torch, or a `.onnx` graph in onnxruntime (made for
-    images of the training camera's size)."""
+    images of the training camera's size; `threads` intra-op threads, default torch's)."""
     if path is None:
         return None
     if Path(path).suffix == ".onnx":
         from posenet.export.onnx_export import input_shape, onnx_session, run_detector_onnx
 
-        session = _session(path, onnx_session)
+        session = _session(path, lambda graph: onnx_session(graph, threads))
         size = tuple(input_shape(session, "image")[:-3:-1])
         if size != camera.size:
             w, h = camera.size or (0, 0)
