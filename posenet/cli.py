@@ -523,8 +523,9 @@ def viz(
     type=click.IntRange(min=1),
     default=1,
     show_default=True,
-    help="Frames predicted together: loaded and warped in threads, the detector (a .pt one) and the pose "
-    "network run on the batch (posenet.predict.batch); 1: one at a time. Not with --track.",
+    help="Frames predicted together: loaded and warped in threads, the detector (a .pt one; an .onnx "
+    "one on the frames side by side) and the pose network run on the batch (posenet.predict.batch); "
+    "1: one at a time. Not with --track.",
 )
 @click.option(
     "--cuda-graphs", is_flag=True, help="With --batch on CUDA: replay both networks as CUDA graphs."
