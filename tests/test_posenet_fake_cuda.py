@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+from timm.optim import param_groups_weight_decay
 from torch import nn
 from torch._subclasses.fake_tensor import FakeTensorDeviceMismatchError, FakeTensorMode
 
@@ -22,6 +23,7 @@ from posenet.evaluation.metrics import sample_errors
 from posenet.geometry import decode_pose
 from posenet.models import PRESETS, VARIANTS, create_model
 from posenet.training.losses import PmObject, pose_losses
+from posenet.training.ranger import LOOKAHEAD_K, Ranger
 
 CUDA = torch.device("cuda", 0)
 
@@ -122,3 +124,21 @@ def test_mask_detector_logits_and_losses_stay_on_cuda() -> None:
         losses = mask_losses(logits, torch.zeros(2, 1, 240, 320, device=CUDA))
     assert logits.device == CUDA and logits.shape == (2, 1, 240, 320)
     assert all(v.device == CUDA for v in losses.values())
+
+
+def test_the_fused_ranger_steps_on_cuda() -> None:
+    """Ranger on CUDA: torch's fused Adam kernel with each step count on its parameter's device (the
+    kernel reads it there), through RAdam's unrectified first steps and a Lookahead pull (step 6)."""
+    net = nn.Sequential(nn.Conv2d(3, 4, 3), nn.BatchNorm2d(4), nn.Flatten(), nn.Linear(4 * 4 * 4, 2))
+    mode = FakeTensorMode()
+    with mode:
+        to_fake_cuda(net, mode)
+        optimizer = Ranger(param_groups_weight_decay(net, 0.05), lr=1e-3, weight_decay=0.05, eps=1e-8)
+        for _ in range(LOOKAHEAD_K + 1):
+            for p in net.parameters():
+                p.grad = torch.randn_like(p)
+            optimizer.step()
+    for p in net.parameters():
+        state = optimizer.state[p]
+        assert set(state) == {"step", "exp_avg", "exp_avg_sq", "lookahead_slow_buff"}
+        assert all(v.device == CUDA and v.dtype == torch.float32 for v in state.values())
