@@ -78,6 +78,10 @@ class Ranger(torch.optim.Adam):
     @torch.no_grad()
     def step(self, closure: Any = None) -> Any:  # noqa: ANN401 (torch's signature)
         """One RAdam step of every group, then Lookahead where a group's k-th step falls."""
+        loss = None
+        if closure is not None:  # the gradients first, as torch's optimizers take them
+            with torch.enable_grad():
+                loss = closure()
         given = [(g["lr"], g["eps"], g["weight_decay"]) for g in self.param_groups]
         for group, (lr, eps, weight_decay) in zip(self.param_groups, given, strict=True):
             t = group["lookahead_step"] + 1
@@ -87,7 +91,7 @@ class Ranger(torch.optim.Adam):
             rect = rectification(t, group["betas"][1])
             group.update(lr=lr * rect, eps=eps / math.sqrt(1 - group["betas"][1] ** t), weight_decay=0.0)
         try:
-            loss = super().step(closure)  # the moments, and the rectified update (lr 0 before rectification)
+            super().step()  # the moments, and the rectified update (lr 0 before rectification)
         finally:
             for group, (lr, eps, weight_decay) in zip(self.param_groups, given, strict=True):
                 group.update(lr=lr, eps=eps, weight_decay=weight_decay)
