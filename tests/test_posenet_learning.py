@@ -53,6 +53,11 @@ MAX_TE_RATIO = 0.6
 # beside other work) gave the same verdicts: xyz ratio 0.34, translation ratio 0.23, rotation median
 # 3.3 deg, held-out mask IoU 0.32 vs 0.28 (a gain of 0.04, ~1.4 standard errors, where 2 threads give
 # 0.06); so the verdicts do not rest on one order's rounding, though the mask gain moves with it.
+# Rounding moves the training figures most: on 2026-11-29, with Ranger's RAdam run through the fused Adam
+# kernel (the same arithmetic, other roundings) 2 threads gave xyz 0.33, translation ratio 0.47 and a
+# rotation median of 13.9 deg (the median of 16 images: a few images turning decide it), mask 0.33 vs
+# 0.28; one thread 0.33, 0.25, 2.6 deg, 0.34 vs 0.28; the foreach RAdam that day, 2 threads, 0.32, 0.34,
+# 3.1 deg, 0.33 vs 0.28. The translation bound's margin is the thinnest (1.3x at 0.47).
 THREADS = 2
 
 
