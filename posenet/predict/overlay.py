@@ -3,6 +3,8 @@ silhouette edge, its axes at the predicted pose, and the box; a contact sheet of
 
 from __future__ import annotations
 
+import re
+
 import cv2
 import numpy as np
 
@@ -62,12 +64,32 @@ def draw_box(image: np.ndarray, box: Box, colour: tuple[int, int, int]) -> None:
     cv2.rectangle(image, *corners, colour, thickness(image))
 
 
+LABEL_MARGIN = 6  # pixels between a label and the image's left and right edges
+LABEL_FONT = cv2.FONT_HERSHEY_SIMPLEX
+
+
 def draw_label(image: np.ndarray, text: str, colour: tuple[int, int, int]) -> None:
-    """Write `text` at the top left of `image` in place, sized to the image, over a dark outline."""
+    """Write `text` at the top left of `image` in place, sized to the image, over a dark outline; a text
+    wider than the image goes on over as many lines as it needs (label_lines)."""
     lw, scale = thickness(image), max(0.4, max(image.shape[:2]) / 1200)
-    origin = (6, round(22 * scale / 0.5))
-    for ink, width in (((0, 0, 0), lw + 2), (colour, lw)):
-        cv2.putText(image, text, origin, cv2.FONT_HERSHEY_SIMPLEX, scale, ink, width, cv2.LINE_AA)
+    leading = round(22 * scale / 0.5)
+    for row, line in enumerate(label_lines(text, image.shape[1] - 2 * LABEL_MARGIN, scale, lw + 2)):
+        for ink, width in (((0, 0, 0), lw + 2), (colour, lw)):
+            origin = (LABEL_MARGIN, leading * (row + 1))
+            cv2.putText(image, line, origin, LABEL_FONT, scale, ink, width, cv2.LINE_AA)
+
+
+def label_lines(text: str, width: int, scale: float, stroke: int) -> list[str]:
+    """`text` broken after spaces and commas into lines no wider than `width` pixels in the label's
+    font (a single word wider than that keeps a line of its own)."""
+    lines = [""]
+    for word in re.findall(r"[^ ,]+[ ,]?|[ ,]", text):
+        wider = lines[-1] + word
+        if lines[-1] and cv2.getTextSize(wider.rstrip(), LABEL_FONT, scale, stroke)[0][0] > width:
+            lines.append(word.lstrip())
+        else:
+            lines[-1] = wider
+    return [line.rstrip() for line in lines]
 
 
 def _pt(p: np.ndarray) -> tuple[int, int]:
