@@ -82,37 +82,38 @@ class Ranger(torch.optim.Adam):
         if closure is not None:  # the gradients first, as torch's optimizers take them
             with torch.enable_grad():
                 loss = closure()
-        given = [(g["lr"], g["eps"], g["weight_decay"]) for g in self.param_groups]
-        for group, (lr, eps, weight_decay) in zip(self.param_groups, given, strict=True):
-            t = group["lookahead_step"] + 1
+        # per group: its parameters with a gradient, its rectification, and the lr, eps and weight decay
+        # it was given, which the kernel's call replaces for a moment
+        plan = []
+        for group in self.param_groups:
+            lr, eps, weight_decay, beta2 = group["lr"], group["eps"], group["weight_decay"], group["betas"][1]
             params = [p for p in group["params"] if p.grad is not None]
+            t = group["lookahead_step"] + 1
+            rect = rectification(t, beta2)
             if weight_decay and params:
                 torch._foreach_mul_(params, 1 - lr * weight_decay)
-            rect = rectification(t, group["betas"][1])
-            group.update(lr=lr * rect, eps=eps / math.sqrt(1 - group["betas"][1] ** t), weight_decay=0.0)
+            plan.append((group, params, rect, (lr, eps, weight_decay)))
+            group.update(lr=lr * rect, eps=eps / math.sqrt(1 - beta2**t), weight_decay=0.0)
         try:
             super().step()  # the moments, and the rectified update (lr 0 before rectification)
         finally:
-            for group, (lr, eps, weight_decay) in zip(self.param_groups, given, strict=True):
+            for group, _, _, (lr, eps, weight_decay) in plan:
                 group.update(lr=lr, eps=eps, weight_decay=weight_decay)
-        for group in self.param_groups:
+        for group, params, rect, _ in plan:
             group["lookahead_step"] += 1
             t = group["lookahead_step"]
-            params = [p for p in group["params"] if p.grad is not None]
-            if params and rectification(t, group["betas"][1]) == 0:
+            if params and rect == 0:
                 # RAdam's unrectified step: p -= lr / c1 * m
                 moments = [self.state[p]["exp_avg"] for p in params]
                 torch._foreach_add_(params, moments, alpha=-group["lr"] / (1 - group["betas"][0] ** t))
-            if t % group["lookahead_k"] == 0:
-                self._lookahead(group)
+            if params and t % group["lookahead_k"] == 0:
+                self._lookahead(group, params)
         return loss
 
-    def _lookahead(self, group: dict[str, Any]) -> None:
-        """Pull the group's weights halfway (alpha) back to their slow copies, which then take their place;
-        the slow copy starts as the weights at the first pull, as in timm."""
-        fast = [p for p in group["params"] if p.grad is not None]
-        if not fast:
-            return
+    def _lookahead(self, group: dict[str, Any], fast: list[torch.Tensor]) -> None:
+        """Pull the group's weights `fast` (those with a gradient) halfway (alpha) back to their slow
+        copies, which then take their place; the slow copy starts as the weights at the first pull, as in
+        timm."""
         for p in fast:
             if "lookahead_slow_buff" not in self.state[p]:
                 self.state[p]["lookahead_slow_buff"] = p.detach().clone()
