@@ -226,8 +226,6 @@ class BatchPredictor:
             return []
         p, tic = self.predictor, time.perf_counter()
         if self.boxes is None:
-            if self.per_image is None:
-                raise PosenetError("no detector loaded: give --detector, --box or --boxes")
             found = list(self.pool.map(lambda image: detect_box(self.per_image, image), seen))
         else:
             batch = torch.from_numpy(np.stack(seen)).to(p.device, non_blocking=True)

@@ -176,8 +176,6 @@ class Predictor:
 
     def detect(self, image: np.ndarray) -> tuple[Box, float] | None:
         """The detector's best box [x, y, w, h] and score in an image of the training camera, or None."""
-        if self.detector is None:
-            raise PosenetError("no detector loaded: give --detector, --box or --boxes")
         return detect_box(self.detector, image)
 
     def __call__(self, image: np.ndarray, camera: Camera | np.ndarray, box: Box | None = None) -> Pose:
@@ -240,8 +238,11 @@ class Predictor:
         return float(np.mean(error <= roi.scale / self.output_res))
 
 
-def detect_box(detector: Detector, image: np.ndarray) -> tuple[Box, float] | None:
-    """`detector`'s best box [x, y, w, h] and score in a BGR uint8 image, or None."""
+def detect_box(detector: Detector | None, image: np.ndarray) -> tuple[Box, float] | None:
+    """`detector`'s best box [x, y, w, h] and score in a BGR uint8 image, or None; no detector is an
+    error naming the options that give one."""
+    if detector is None:
+        raise PosenetError("no detector loaded: give --detector, --box or --boxes")
     found = detector(image[..., ::-1].astype(np.float32) / 255.0)
     return None if found is None else detector_box(*found)
 
