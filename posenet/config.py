@@ -103,7 +103,9 @@ class OptimConfig:
     warmup_factor: float = 0.001
     anneal_point: float = 0.72  # fraction of all iterations spent before the cosine decay starts
     seed: int = 0
-    threads: int = 0  # CPU threads for training (0: one per core); pinned so a run's losses are reproducible
+    # CPU threads for training (0: OMP_NUM_THREADS where set, else one per core); pinned so a run's losses
+    # are reproducible
+    threads: int = 0
     log_every: int = 10  # TensorBoard scalar interval (steps)
     ckpt_every: int = 1  # epochs between rewrites of OUT/last.pt (it is always written when a run stops)
     # mixed precision (posenet.training.amp): auto (bf16 on a CUDA GPU that has it, else float32) | off |

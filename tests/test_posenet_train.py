@@ -22,7 +22,7 @@ from posenet.cli import main
 from posenet.config import OptimConfig, load_config
 from posenet.data.layout import scan_split
 from posenet.training.budget import TimeBudget
-from posenet.training.train import lr_factor, throughput
+from posenet.training.train import cpu_threads, lr_factor, throughput
 
 TIMES = ("step_s", "wait_s")  # what a log row measures of the wall clock; the rest is arithmetic
 TINY = """\
@@ -84,6 +84,22 @@ def test_resume_continues_with_the_identical_next_step_loss(
     assert (stopped / "tb").is_dir()
 
 
+@pytest.mark.parametrize(
+    ("threads", "env", "expected"),
+    [(3, "5", 3), (0, "5", 5)] + [(0, env, os.cpu_count()) for env in (None, "0", "two", "")],
+)
+def test_training_threads_are_the_config_s_else_omp_num_threads_else_one_per_core(
+    threads: int, env: str | None, expected: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """optim.threads wins; at 0 a positive OMP_NUM_THREADS (a job script sharing a node) sets the count,
+    and anything else in it is ignored for one thread per core."""
+    if env is None:
+        monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    else:
+        monkeypatch.setenv("OMP_NUM_THREADS", env)
+    assert cpu_threads(threads) == expected
+
+
 def test_same_config_and_seed_give_the_same_losses_whatever_ran_before(
     dataset_dir: Path, tiny_config: Path, tmp_path: Path
 ) -> None:
@@ -91,7 +107,7 @@ def test_same_config_and_seed_give_the_same_losses_whatever_ran_before(
     same process) does not change the float summation order, hence not the losses."""
     before = torch.get_num_threads()
     runs = []
-    for threads in (before, 1):
+    for threads in (2, 1):
         torch.set_num_threads(threads)
         run = tmp_path / f"threads{threads}"
         code, out = posenet(

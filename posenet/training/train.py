@@ -67,13 +67,23 @@ def steps_per_epoch(n_instances: int, o: OptimConfig, world: int = 1) -> int:
     return steps
 
 
+def cpu_threads(threads: int) -> int:
+    """The intra-op threads that `threads` asks for: itself, or for 0 OMP_NUM_THREADS where it is set to a
+    positive count (as a cluster's job script or a test runner that shares the cores sets it, and as
+    torch's own default reads it), else one per core."""
+    if threads:
+        return threads
+    env = os.environ.get("OMP_NUM_THREADS", "").strip()
+    return int(env) if env.isdigit() and int(env) > 0 else os.cpu_count() or 1
+
+
 def pin_cpu_threads(threads: int) -> None:
-    """Fix the intra-op thread count (0: one per core) and make torch pick deterministic kernels.
+    """Fix the intra-op thread count (`cpu_threads`) and make torch pick deterministic kernels.
 
     The float summation order depends on the thread count, and any code in the process may have changed
     it (e.g. `posenet bench --threads`), so training sets it itself: same config and seed, same losses.
     """
-    torch.set_num_threads(threads or os.cpu_count() or 1)
+    torch.set_num_threads(cpu_threads(threads))
     torch.use_deterministic_algorithms(True, warn_only=True)
     # which also fills every new tensor with NaN, a debugging aid for code that reads memory it never
     # wrote: ~2,300 fills a smoke step, 8 % of it on 2 cores (418 -> 385 ms, median of 8 interleaved
