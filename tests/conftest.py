@@ -14,12 +14,6 @@ from scgen.scenes.model import TargetModel, load_target
 SMALL = (320, 240)
 # albumentations asks PyPI for a newer version on import (2 s timeout): tests stay off the network
 os.environ.setdefault("NO_ALBUMENTATIONS_UPDATE", "1")
-# pytest-xdist's processes share the cores: each gets its share of threads for torch and OpenBLAS, which
-# training's `optim.threads: 0` follows (posenet.training.train.cpu_threads). Two processes of 2 threads
-# on 2 cores made 4 threads on 2 cores, and 2 threads train only ~1.3x faster than one, so the suite spent
-# its CPU time on waiting threads. A test that needs more threads sets them itself.
-if xdist_workers := int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0")):
-    os.environ.setdefault("OMP_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // xdist_workers)))
 # The modules that take minutes (2026-11-28, 2 cores: the learning test ~9.5 min, the detector's ~3,
 # packaging's ~2.5, scale-out's ~2), run first: `make test` spreads whole modules over pytest-xdist
 # workers in collection order, and one started last would run alone at the end.
