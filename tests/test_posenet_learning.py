@@ -53,7 +53,8 @@ MAX_TE_RATIO = 0.6
 # it every figure below, is the same on a CI machine of any core count. It also leaves the second core to
 # the suite's other pytest-xdist process: alone on 2 idle cores one thread trained in 585 s (user + sys
 # 684 s with the 2 loader processes, 2026-11-29) where 2 threads took 572 s (2026-11-27), so the second
-# thread bought ~2 % and, beside the other process, made 3 threads on 2 cores (767 s in the suite).
+# thread bought ~2 % and, beside the other process, made 3 threads on 2 cores (in the suite: 767 s on two
+# threads, 750 s on one).
 # The verdicts do not rest on one order's rounding. With Ranger's RAdam run through the fused Adam kernel
 # (2026-11-29), one thread gave xyz ratio 0.33, translation ratio 0.25, rotation median 2.6 deg, held-out
 # mask IoU 0.34 vs 0.28; 2 threads gave 0.33, 0.47, 13.9 deg (the median of 16 images: a few images
