@@ -27,7 +27,7 @@ from posenet.errors import PosenetError
 from posenet.evaluation.evaluate import evaluate
 from posenet.predict import Pose, Predictor, make_camera
 from posenet.predict.batch import BatchPredictor
-from posenet.predict.overlay import LABEL_MARGIN, draw_label
+from posenet.predict.overlay import LABEL_MARGIN, draw_label, label_style
 from scgen.generator import Generator
 from scgen.io import bop
 from scgen.run.runner import RenderJob, run_render
@@ -616,9 +616,9 @@ def test_a_label_wider_than_its_image_goes_on_over_lines():
     """An overlay's label with every flag, on a 320x240 image: broken over two lines that stay inside the
     image (a cut label inks the last column); a label that fits keeps one line."""
     long_label, short_label = "score 0.09 conf 0.00 behind_camera,low_confidence", "score 0.93 conf 0.88"
-    leading = round(22 * 0.4 / 0.5)  # draw_label's line pitch at the smallest font scale, 0.4
     for text, lines in ((long_label, 2), (short_label, 1)):
         image = np.zeros((240, 320, 3), np.uint8)
+        leading = label_style(image)[2]
         draw_label(image, text, (0, 0, 255))
         rows = np.nonzero(image.any(axis=(1, 2)))[0]
         assert not image[:, -LABEL_MARGIN // 2 :].any(), text

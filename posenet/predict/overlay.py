@@ -68,11 +68,17 @@ LABEL_MARGIN = 6  # pixels between a label and the image's left and right edges
 LABEL_FONT = cv2.FONT_HERSHEY_SIMPLEX
 
 
+def label_style(image: np.ndarray) -> tuple[int, float, int]:
+    """(stroke width, font scale, line pitch in pixels) of a label on `image`: sized to the image, the
+    scale 0.4 at the least."""
+    scale = max(0.4, max(image.shape[:2]) / 1200)
+    return thickness(image), scale, round(22 * scale / 0.5)
+
+
 def draw_label(image: np.ndarray, text: str, colour: tuple[int, int, int]) -> None:
-    """Write `text` at the top left of `image` in place, sized to the image, over a dark outline; a text
-    wider than the image goes on over as many lines as it needs (label_lines)."""
-    lw, scale = thickness(image), max(0.4, max(image.shape[:2]) / 1200)
-    leading = round(22 * scale / 0.5)
+    """Write `text` at the top left of `image` in place (label_style), over a dark outline; a text wider
+    than the image goes on over as many lines as it needs (label_lines)."""
+    lw, scale, leading = label_style(image)
     for row, line in enumerate(label_lines(text, image.shape[1] - 2 * LABEL_MARGIN, scale, lw + 2)):
         for ink, width in (((0, 0, 0), lw + 2), (colour, lw)):
             origin = (LABEL_MARGIN, leading * (row + 1))
