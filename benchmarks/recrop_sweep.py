@@ -6,11 +6,12 @@ at perturbed ones, each set against the true boxes' first pass over the same ima
 
 For each box source (the ground truth, then `posenet boxes --noise N` of each --noise) and each pass
 count up to --passes, `posenet.evaluate` scores every instance of the splits; an instance passes when its
-ADD is under a tenth of the object's diameter. A row's difference to the true boxes' first pass is the
-mean of the per-image differences (+1, 0, -1), and its standard error their standard deviation over
-sqrt(n): paired, so what the images share cancels. On a network whose ADD@0.1d flips on a fifth of the
-images from one pass to the next, a single figure's binomial error overstates what two rows differ by,
-and the paired error is what a goal of "within 1 point" is read against.
+ADD (ADD-S for a symmetric object, as posenet eval's add_0.1d) is under a tenth of the object's
+diameter. A row's difference to the true boxes' first pass is the mean of the per-image differences
+(+1, 0, -1), and its standard error their standard deviation over sqrt(n): paired, so what the images
+share cancels. On a network whose ADD@0.1d flips on a fifth of the images from one pass to the next, a
+single figure's binomial error overstates what two rows differ by, and the paired error is what a goal
+of "within 1 point" is read against.
 
 Writes OUT/results.json after every row (a re-run with the same --out resumes) and prints the table: per
 row the mean IoU of each pass's crop box with bbox_obj, ADD@0.1d, the paired difference and its error,
@@ -22,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -30,6 +32,7 @@ from harness import parser, run_script
 
 from posenet import evaluate
 from posenet.errors import PosenetError
+from posenet.evaluation.metrics import headline_add
 
 POSENET = Path(sys.executable).with_name("posenet")
 
@@ -63,11 +66,10 @@ def score(args: argparse.Namespace, splits: list[str], noise: float, passes: int
     for split in splits:
         boxes = noisy_boxes(args.data, split, noise, args.out) if noise > 0 else None
         result = evaluate(args.data, args.pose, split, boxes=boxes, workers=2, passes=passes)
+        add_key = headline_add(result.summary["symmetric"])[0]  # as posenet eval's add_0.1d: inf on a miss
         for record in result.records:
-            add = record.get("add_m")
-            outcomes[f"{split}/{record['scene_id']}/{record['im_id']}"] = add is not None and (
-                add < 0.1 * result.diameter
-            )
+            key = f"{split}/{record['scene_id']}/{record['im_id']}"
+            outcomes[key] = record[add_key] < 0.1 * result.diameter
         k = len(result.records)
         for i, iou in enumerate(result.summary.get("box_iou") or [1.0] * passes):
             iou_sums[i] += k * iou
@@ -78,10 +80,8 @@ def score(args: argparse.Namespace, splits: list[str], noise: float, passes: int
 def paired_difference(row: dict[str, bool], base: dict[str, bool]) -> tuple[float, float, int, int]:
     """(mean difference, its standard error, images right only in `row`, only in `base`)."""
     diffs = [int(row[k]) - int(base[k]) for k in base]
-    n = len(diffs)
-    mean = sum(diffs) / n
-    sd = math.sqrt(sum((d - mean) ** 2 for d in diffs) / max(n - 1, 1))
-    return mean, sd / math.sqrt(n), diffs.count(1), diffs.count(-1)
+    se = statistics.stdev(diffs) / math.sqrt(len(diffs)) if len(diffs) > 1 else 0.0
+    return statistics.fmean(diffs), se, diffs.count(1), diffs.count(-1)
 
 
 def run(args: argparse.Namespace) -> None:
