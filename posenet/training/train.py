@@ -69,8 +69,8 @@ def steps_per_epoch(n_instances: int, o: OptimConfig, world: int = 1) -> int:
 
 def cpu_threads(threads: int) -> int:
     """The intra-op threads that `threads` asks for: itself, or for 0 OMP_NUM_THREADS where it is set to a
-    positive count (as a cluster's job script or a test runner that shares the cores sets it, and as
-    torch's own default reads it), else one per core."""
+    positive count (as a job script that shares a node sets it, and as torch's own default reads it),
+    else one per core."""
     if threads:
         return threads
     env = os.environ.get("OMP_NUM_THREADS", "").strip()
