@@ -437,7 +437,7 @@ def summary_lines(
         f"schedule: batch {o.batch_size}, {per_epoch} steps per epoch, {schedule}, lr {o.lr:g} (warmup "
         f"{o.warmup_iters} steps, cosine from {o.anneal_point:.0%}); "
         + (f"resuming at step {step}, " if step else "")
-        + f"this run stops at step {stop}",
+        + ("this run stops at the budget" if budget else f"this run stops at step {stop}"),
         f"device: {device.type}"
         + (f" ({threads} threads)" if threads else "")
         + f", {d.workers} loader processes ({d.loader} path)"
