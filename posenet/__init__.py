@@ -4,17 +4,20 @@ The Python API, loaded on first use (so that `import posenet` stays light): `pos
 `posenet train`), `posenet.evaluate` (a checkpoint on a split, as `posenet eval`), `posenet.Predictor`
 and `posenet.Pose` (a pose from any image, as `posenet predict`), `posenet.make_camera`.
 
-OpenMP's idle threads wait passively here (OMP_WAIT_POLICY=PASSIVE, unless the environment sets it):
-otherwise torch's intra-op threads spin at every barrier, and on a shared CPU (the loader processes,
-other jobs) a spinning thread holds the core that the thread it waits for needs. On 2 shared cores that
-made a smoke-preset training step take 4-12 s instead of ~1 s. OpenMP reads the variable once, when torch
-is imported: importing posenet first sets it.
+OpenMP's idle threads spin briefly, then sleep (GOMP_SPINCOUNT=1000, about 10 us, unless the environment
+sets GOMP_SPINCOUNT or OMP_WAIT_POLICY). libgomp's default spins 300,000 times at every barrier, and on a
+shared CPU (the loader processes, other jobs) a spinning thread holds the core that the thread it waits
+for needs: on 2 shared cores a smoke-preset training step took 4-12 s instead of ~1 s. Never spinning
+(OMP_WAIT_POLICY=PASSIVE) costs a thread's wake-up at every operator instead: 1.2x slower on 2 idle
+cores (docs/posenet.md). OpenMP reads the variables once, when torch is imported: importing posenet
+first sets them.
 """
 
 import os
 from typing import Any
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+if "OMP_WAIT_POLICY" not in os.environ:  # a user's wait policy stands, as does a user's spin count
+    os.environ.setdefault("GOMP_SPINCOUNT", "1000")  # libgomp's own count for an oversubscribed machine
 
 # the `posenet` command's imports (torch, timm), timed by posenet.console: a training run's first seconds
 IMPORT_SECONDS: float | None = None
