@@ -6,17 +6,23 @@ Stages, each written to --json as soon as it is measured (a killed run keeps wha
   2. train step of --config (or each --variant), random init, in training's precision and memory format:
      the step as posenet trains it (fused Ranger, losses read back every log_every steps) and, on a
      CPU, 3a10b4b's step beside it (timm's Lookahead(RAdam), every step's losses read back at once),
-     timed in alternating blocks in one process, with their ratio; on CUDA the step captured
+     timed in alternating blocks in one process, with their ratio (and each --candidate config's step
+     in the same blocks, with 3a10b4b's step of --config over it: what less arithmetic would buy); on
+     CUDA the step captured
      (torch.compile mode="reduce-overhead": CUDA graphs) beside the eager one. Printed as
      `train step (CONFIG, batch B, DEVICE, ...): X ms (Y samples/s)`, posenet_dataloader.py's form;
   3. the optimizer step alone on that model, timm's against posenet's (same gradients);
   4. `posenet train` itself for --train-steps steps: samples/s from its own log (loader waits included),
-     the first --skip steps (start-up, compilation) left out;
+     the first --skip steps (start-up, compilation) left out; with --against TREE (a checkout of another
+     commit, e.g. `git worktree add /tmp/old 3a10b4b`), `posenet train --config CONFIG` from this tree and
+     from TREE in alternating rounds, each with its own package's defaults (OpenMP waiting included: the
+     children get no GOMP_SPINCOUNT or OMP_WAIT_POLICY), and the ratio of their median steps;
   5. predict by stage on the train split's images at their ground-truth boxes, with the checkpoint that
      stage 4 wrote (decode, crop, pose network, solve; the detector only with --detector).
 
 Usage: python benchmarks/throughput.py [--data DIR] [--workers 2] [--batch 8] [--steps 5] [--samples 300]
-       [--config paper|smoke] [--variant V ...] [--train-steps 200] [--json FILE] [--gpu-check]
+       [--config paper|smoke] [--variant V ...] [--candidate CONFIG ...] [--train-steps 200]
+       [--json FILE] [--gpu-check]
 Without --data, 48 samples at 640x480 are rendered with Mitsuba into a temporary folder first. On a CPU
 by default (config smoke); --gpu-check sizes every stage for one short run on a GPU node (paper config,
 both variants, 14 loader processes, batch 24, 200 train steps each: about 5 minutes on one H200).
@@ -26,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -60,6 +67,7 @@ from posenet.training.train import (
 
 GPU_CHECK = {"workers": 14, "batch": 24, "steps": 20, "samples": 1000, "train_steps": 200}
 BLOCKS = 3  # alternating blocks per compared step: old, new, old, new, ...
+OPENMP_WAITING = ("GOMP_SPINCOUNT", "OMP_WAIT_POLICY")  # what posenet's import sets (posenet/__init__.py)
 
 Step = Callable[[], torch.Tensor]
 
@@ -198,14 +206,30 @@ def optimizer_times(cfg: TrainConfig, batch: dict, pm: PmObject, n: int) -> dict
     return {k: statistics.median(v) for k, v in times.items()}
 
 
-def train_rate(data: Path, cfg: TrainConfig, steps: int, skip: int, out: Path) -> tuple[float, float]:
-    """`posenet train` for `steps` steps in a child process: (samples/s, seconds per step) from its log
-    after the first `skip` steps."""
-    config = out.with_suffix(".yaml")
-    config.write_text(cfg.to_yaml())
+def train_rate(
+    data: Path,
+    config: TrainConfig | str,
+    steps: int,
+    skip: int,
+    out: Path,
+    tree: Path | None = None,
+    against: bool = False,
+) -> tuple[float, float]:
+    """`posenet train` for `steps` steps in a child process, from this checkout or from source tree `tree`:
+    (samples/s, seconds per step) from its log after the first `skip` steps. `config`: a config (written
+    to a file) or a preset name or file as `--config` takes it. `against`: the child's environment
+    without OPENMP_WAITING, so that each tree's posenet sets its own."""
+    if not isinstance(config, str):
+        out.with_suffix(".yaml").write_text(config.to_yaml())
+        config = str(out.with_suffix(".yaml"))
     cmd = [sys.executable, "-c", "from posenet.cli import main; main()", "train", "--data", str(data)]
-    cmd += ["--out", str(out), "--config", str(config), "--max-steps", str(steps)]
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    cmd += ["--out", str(out), "--config", config, "--max-steps", str(steps)]
+    env = None
+    if tree is not None:  # first on the path, and the working folder (which `python -c` puts before it)
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+    if against:  # each tree's own OpenMP waiting, not what importing this posenet put in the environment
+        env = {k: v for k, v in (env or os.environ).items() if k not in OPENMP_WAITING}
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, env=env, cwd=tree)
     rows = [json.loads(ln) for ln in (out / LOG_FILE).read_text().splitlines()][skip:]
     seconds = sum(r["step_s"] for r in rows)
     return sum(r["images"] for r in rows) / seconds, seconds / len(rows)
@@ -250,10 +274,23 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--batch", type=int, default=8, help="Loader batch size (the paper trains with 24).")
     ap.add_argument("--steps", type=int, default=5, help="Steps per timed block of the step comparison.")
     ap.add_argument("--variant", action="append", help="Step time of this variant (repeatable).")
+    ap.add_argument(
+        "--candidate",
+        action="append",
+        default=[],
+        help="On a CPU: this config's step (a preset or YAML/TOML file) in the same timed blocks, with "
+        "3a10b4b's step of --config over it (repeatable).",
+    )
     ap.add_argument("--train-steps", type=int, default=200, help="posenet train's steps (0: skip the stage).")
     ap.add_argument("--skip", type=int, default=20, help="posenet train's first steps left out of its rate.")
     ap.add_argument("--predict", type=int, default=60, help="Images predict runs on (0: skip the stage).")
     ap.add_argument("--detector", type=Path, default=None, help="A detector checkpoint for predict's stage.")
+    ap.add_argument(
+        "--against",
+        type=Path,
+        default=None,
+        help="A source tree of another commit: posenet train from it and from this one, side by side.",
+    )
     ap.add_argument(
         "--threads",
         type=int,
@@ -298,7 +335,8 @@ def run(args: argparse.Namespace) -> None:
         if device.type == "cpu":
             pin_cpu_threads(cfg.optim.threads)  # as training: one thread per core
         name = f"{config} config" + (f", {variant}" if variant else "")
-        step_lines(res, data, cfg, name, dev, device, args.steps)
+        candidates = {c: candidate_config(c, variant, cfg.optim.threads) for c in args.candidate}
+        step_lines(res, data, cfg, name, dev, device, args.steps, candidates)
         if args.train_steps:
             with tempfile.TemporaryDirectory() as tmp:
                 run = Path(tmp) / "run"
@@ -320,7 +358,33 @@ def run(args: argparse.Namespace) -> None:
                 )
                 if args.predict:
                     predict_line(res, data, cfg, run / LAST, args, name, dev, device, variant)
+    if args.against is not None and args.train_steps:
+        against_line(res, data, config, args, dev)
     print("\n".join(["", f"== throughput on {dev} ({config} config)", *res.lines]))
+
+
+def against_line(res: Results, data: Path, config: str, args: argparse.Namespace, dev: str) -> None:
+    """Stage 4 side by side: `posenet train --config CONFIG` from this tree and from --against, in
+    BLOCKS alternating rounds; their median seconds a step and the ratio."""
+    trees = {"this tree": None, str(args.against): args.against.resolve()}
+    times: dict[str, list[float]] = {k: [] for k in trees}
+    for _ in range(BLOCKS):
+        for label, tree in trees.items():
+            with tempfile.TemporaryDirectory() as tmp:
+                times[label].append(
+                    train_rate(data, config, args.train_steps, args.skip, Path(tmp) / "run", tree, True)[1]
+                )
+    (new, t_new), (old, t_old) = ((k, statistics.median(v)) for k, v in times.items())
+    for label, sec in ((new, t_new), (old, t_old)):
+        res.add(
+            f"posenet train ({config} config, {dev}, steps {args.skip + 1}-{args.train_steps}, "
+            f"from {label}): {1000 * sec:.1f} ms a step, median of {BLOCKS} alternating rounds "
+            f"({', '.join(f'{1000 * s:.0f}' for s in times[label])})",
+            stage="posenet train against",
+            tree=label,
+            ms=1000 * sec,
+        )
+    res.add(f"  ratio: {old} / {new} = {t_old / t_new:.2f}", stage="posenet train ratio", ratio=t_old / t_new)
 
 
 def predict_line(
@@ -375,17 +439,35 @@ def process_line(res: Results, data: Path, args: argparse.Namespace) -> None:
     )
 
 
+def candidate_config(name: str, variant: str | None, threads: int) -> TrainConfig:
+    """A --candidate's config as the steps run it: random init, --config's threads."""
+    cfg = load_config(name, variant=variant)
+    cfg.model["pretrained"] = None
+    cfg.optim.threads = threads
+    return cfg
+
+
 def step_lines(
-    res: Results, data: Path, cfg: TrainConfig, name: str, dev: str, device: torch.device, n: int
+    res: Results,
+    data: Path,
+    cfg: TrainConfig,
+    name: str,
+    dev: str,
+    device: torch.device,
+    n: int,
+    candidates: dict[str, TrainConfig],
 ) -> None:
-    """Stages 2 and 3: the step compared (old and new on a CPU, eager and captured on CUDA), then the
-    optimizer step alone."""
+    """Stages 2 and 3: the step compared (old and new on a CPU, with any candidate configs' steps;
+    eager and captured on CUDA), then the optimizer step alone."""
     batch, pm, precision, bs = step_setup(data, cfg, device)
     steps = {"eager (posenet)": eager_step(cfg, batch, pm, precision, old=False)}
+    old = "eager, 3a10b4b's step (timm Ranger, per-step readback)"
     if device.type == "cpu":
-        steps["eager, 3a10b4b's step (timm Ranger, per-step readback)"] = eager_step(
-            cfg, batch, pm, precision, old=True
-        )
+        steps[old] = eager_step(cfg, batch, pm, precision, old=True)
+        for label, candidate in candidates.items():
+            c_batch, c_pm, c_precision, _ = step_setup(data, candidate, device)
+            c_step = eager_step(candidate, c_batch, c_pm, c_precision, old=False)
+            steps[f"eager (posenet), config {label}"] = c_step
     else:
         steps["captured (torch.compile reduce-overhead)"] = captured_step(cfg, batch, pm, precision)
     times: dict[str, float] = {}
@@ -408,9 +490,15 @@ def step_lines(
             ms=1000 * sec,
             samples_s=bs / sec,
         )
-    if len(times) == 2:
-        (a, ta), (b, tb) = times.items()
+    if len(times) >= 2:
+        (a, ta), (b, tb) = list(times.items())[:2]
         res.add(f"  ratio: {b} / {a} = {tb / ta:.2f}", stage="step ratio", ratio=tb / ta)
+    for label in candidates:
+        what = f"eager (posenet), config {label}"
+        if what in times and old in times:
+            ratio = times[old] / times[what]
+            res.add(f"  ratio: {old} / {what} = {ratio:.2f}", stage="step ratio", candidate=label,
+                    ratio=ratio)  # fmt: skip
     opt = optimizer_times(cfg, batch, pm, max(n, 5))
     res.add(
         f"optimizer step ({name}, {dev}): " + ", ".join(f"{k} {1000 * v:.1f} ms" for k, v in opt.items()),
