@@ -32,7 +32,7 @@ KERNELS2 ?= ATEN_CPU_CAPABILITY=default ONEDNN_MAX_CPU_ISA=SSE41 OPENBLAS_CORETY
 
 test: install
 	$(BIN)/ruff check .
-	@echo "the suite: ~800 tests on $(WORKERS) processes, ~25 min on 2 cores (25.6 min on 2026-11-29; real renders and training runs); a dot per test"
+	@echo "the suite: ~800 tests on $(WORKERS) processes, 12-28 min on 2 cores (11.6-28.4 min on 2026-11-29: the machine sets it; real renders and training runs); a dot per test"
 	env OMP_WAIT_POLICY=PASSIVE $(BIN)/pytest -q -n $(WORKERS) --dist loadfile --no-loadscope-reorder
 	@echo "the numeric tests (-m numeric) again under the second kernel set: $(KERNELS2)"
 	env $(KERNELS2) $(BIN)/pytest -q -m numeric
