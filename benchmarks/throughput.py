@@ -48,6 +48,7 @@ import torch
 from harness import parser, run_script
 from timm.optim import create_optimizer_v2
 
+from posenet import OPENMP_WAITING
 from posenet.config import TrainConfig, load_config
 from posenet.data import open_split
 from posenet.data.layout import scan_split
@@ -67,7 +68,6 @@ from posenet.training.train import (
 
 GPU_CHECK = {"workers": 14, "batch": 24, "steps": 20, "samples": 1000, "train_steps": 200}
 BLOCKS = 3  # alternating blocks per compared step: old, new, old, new, ...
-OPENMP_WAITING = ("GOMP_SPINCOUNT", "OMP_WAIT_POLICY")  # what posenet's import sets (posenet/__init__.py)
 
 Step = Callable[[], torch.Tensor]
 
@@ -328,14 +328,11 @@ def run(args: argparse.Namespace) -> None:
     process_line(res, data, args)
     torch.set_num_threads(threads)
     for variant in args.variant or [None]:
-        cfg = load_config(config, variant=variant)
-        cfg.model["pretrained"] = None  # random init: no download, the same arithmetic
-        if args.threads is not None:
-            cfg.optim.threads = args.threads
+        cfg = step_config(config, variant, args.threads)
         if device.type == "cpu":
             pin_cpu_threads(cfg.optim.threads)  # as training: one thread per core
         name = f"{config} config" + (f", {variant}" if variant else "")
-        candidates = {c: candidate_config(c, variant, cfg.optim.threads) for c in args.candidate}
+        candidates = {c: step_config(c, variant, cfg.optim.threads) for c in args.candidate}
         step_lines(res, data, cfg, name, dev, device, args.steps, candidates)
         if args.train_steps:
             with tempfile.TemporaryDirectory() as tmp:
@@ -439,11 +436,13 @@ def process_line(res: Results, data: Path, args: argparse.Namespace) -> None:
     )
 
 
-def candidate_config(name: str, variant: str | None, threads: int) -> TrainConfig:
-    """A --candidate's config as the steps run it: random init, --config's threads."""
+def step_config(name: str, variant: str | None, threads: int | None) -> TrainConfig:
+    """A config (--config's or a --candidate's) as the steps run it: random init (no download, the same
+    arithmetic), and `threads` intra-op threads where given."""
     cfg = load_config(name, variant=variant)
     cfg.model["pretrained"] = None
-    cfg.optim.threads = threads
+    if threads is not None:
+        cfg.optim.threads = threads
     return cfg
 
 
@@ -462,12 +461,12 @@ def step_lines(
     batch, pm, precision, bs = step_setup(data, cfg, device)
     steps = {"eager (posenet)": eager_step(cfg, batch, pm, precision, old=False)}
     old = "eager, 3a10b4b's step (timm Ranger, per-step readback)"
+    named = {label: f"eager (posenet), config {label}" for label in candidates}
     if device.type == "cpu":
         steps[old] = eager_step(cfg, batch, pm, precision, old=True)
         for label, candidate in candidates.items():
             c_batch, c_pm, c_precision, _ = step_setup(data, candidate, device)
-            c_step = eager_step(candidate, c_batch, c_pm, c_precision, old=False)
-            steps[f"eager (posenet), config {label}"] = c_step
+            steps[named[label]] = eager_step(candidate, c_batch, c_pm, c_precision, old=False)
     else:
         steps["captured (torch.compile reduce-overhead)"] = captured_step(cfg, batch, pm, precision)
     times: dict[str, float] = {}
@@ -490,11 +489,11 @@ def step_lines(
             ms=1000 * sec,
             samples_s=bs / sec,
         )
-    if len(times) >= 2:
-        (a, ta), (b, tb) = list(times.items())[:2]
+    compared = [(k, t) for k, t in times.items() if k not in named.values()]  # --config's two steps
+    if len(compared) == 2:
+        (a, ta), (b, tb) = compared
         res.add(f"  ratio: {b} / {a} = {tb / ta:.2f}", stage="step ratio", ratio=tb / ta)
-    for label in candidates:
-        what = f"eager (posenet), config {label}"
+    for label, what in named.items():
         if what in times and old in times:
             ratio = times[old] / times[what]
             res.add(f"  ratio: {old} / {what} = {ratio:.2f}", stage="step ratio", candidate=label,

@@ -16,6 +16,8 @@ first sets them.
 import os
 from typing import Any
 
+# the variables that decide how OpenMP waits (benchmarks/throughput.py clears them for another tree's posenet)
+OPENMP_WAITING = ("GOMP_SPINCOUNT", "OMP_WAIT_POLICY")
 if "OMP_WAIT_POLICY" not in os.environ:  # a user's wait policy stands, as does a user's spin count
     os.environ.setdefault("GOMP_SPINCOUNT", "1000")  # libgomp's own count for an oversubscribed machine
 
