@@ -64,7 +64,9 @@ class DataConfig:
     # photometric chain (data/photometric.py): paper (brightness/contrast, color_prob) | spnv2 |
     # gdrnet-occlusion (applied with color_prob)
     augment: str = "paper"
-    workers: int = 4  # DataLoader worker processes per training process
+    # DataLoader worker processes per training process; on a CPU no more than the cores its threads leave
+    # (posenet.training.train.loader_workers)
+    workers: int = 4
     # samples: each worker decodes and augments whole samples (posenet.data.dataset); cache: a packed
     # cache decoded once under DATA/.posenet_cache, the crop, background and colour applied to the whole
     # batch on the training device (posenet.data.cache, batch_augment; augment 'paper', no truncate_fg)

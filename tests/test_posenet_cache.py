@@ -145,7 +145,8 @@ def test_posenet_train_runs_on_the_cache_path_and_says_so(dataset_dir: Path, tmp
     config = tmp_path / "tiny.yaml"
     config.write_text(
         "preset: smoke\nmodel: {input_res: 64, output_res: 16, head_channels: 32, pnp_channels: 32, "
-        "fc_dims: [64, 32]}\ndata: {workers: 1, loader: cache}\noptim: {batch_size: 4, epochs: 1}\n"
+        "fc_dims: [64, 32]}\ndata: {workers: 1, loader: cache}\n"
+        "optim: {batch_size: 4, epochs: 1, threads: 1}\n"  # a core left for the loader process
     )
     res = CliRunner().invoke(main, ["train", "--data", str(dataset_dir), "--out", str(tmp_path / "run"),
                                     "--config", str(config), "--max-steps", "2"])  # fmt: skip

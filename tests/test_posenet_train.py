@@ -22,7 +22,7 @@ from posenet.cli import main
 from posenet.config import OptimConfig, load_config
 from posenet.data.layout import scan_split
 from posenet.training.budget import TimeBudget
-from posenet.training.train import cpu_threads, lr_factor, throughput
+from posenet.training.train import cpu_threads, loader_workers, lr_factor, throughput
 
 TIMES = ("step_s", "wait_s")  # what a log row measures of the wall clock; the rest is arithmetic
 TINY = """\
@@ -69,6 +69,11 @@ def test_resume_continues_with_the_identical_next_step_loss(
         "train", "--data", dataset_dir, "--out", straight, "--config", tiny_config, "--max-steps", 5
     )
     assert code == 0, out
+    # data.workers 1; on a CPU whose cores the training threads all take, the training process loads
+    started, why = re.search(
+        r"(\d+) loader processes \(samples path(; data.workers 1 would share [^)]*)?\)", out
+    ).groups()
+    assert (why is not None) == (int(started) < 1)
     code, out = posenet(
         "train", "--data", dataset_dir, "--out", stopped, "--config", tiny_config, "--max-steps", 3
     )
@@ -82,6 +87,17 @@ def test_resume_continues_with_the_identical_next_step_loss(
     saved = yaml.safe_load((stopped / "config.yaml").read_text())
     assert load_config(str(stopped / "config.yaml")).to_dict() == saved
     assert (stopped / "tb").is_dir()
+
+
+def test_loader_processes_on_a_cpu_get_only_the_cores_the_training_threads_leave() -> None:
+    """A loader process on a core the step's threads use stalls the step (loader_workers); beside a GPU
+    every requested loader process starts."""
+    cpu = torch.device("cpu")
+    assert loader_workers(2, cpu, threads=2, cores=2) == 0
+    assert loader_workers(2, cpu, threads=1, cores=2) == 1
+    assert loader_workers(2, cpu, threads=4, cores=16) == 2
+    assert loader_workers(2, cpu, threads=8, cores=4) == 0
+    assert loader_workers(4, torch.device("cuda"), threads=16, cores=16) == 4
 
 
 @pytest.mark.parametrize(

@@ -40,6 +40,7 @@ from posenet.training.train import (
     check_run_folder,
     checkpoint_due,
     loader_processes,
+    loader_workers,
     make_optimizer,
     memory_format,
     pin_cpu_threads,
@@ -104,7 +105,7 @@ def _train(
     atomic_write_text(out / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     log = RunLog(out, step, None if budget else stop, o.log_every)
     try:
-        stream = _batches(train_set, step, per_epoch, cfg)
+        stream = _batches(train_set, step, per_epoch, cfg, device)
         while step < stop:
             period = (step, stop, per_epoch)
             step, stop = _steps(model, optimizer, scheduler, stream, period, cfg, device, log, budget)
@@ -121,15 +122,21 @@ def _val_images(data: Path, obj_id: int) -> list | None:
     return (image_groups(data, "val", obj_id) or None) if split_scenes(data, "val") else None
 
 
-def _batches(dataset: DetectionDataset, step: int, per_epoch: int, cfg: DetectorConfig) -> Iterator:
+def _batches(
+    dataset: DetectionDataset, step: int, per_epoch: int, cfg: DetectorConfig, device: torch.device
+) -> Iterator:
     """The shuffled batches from `step` on, epoch after epoch (a fixed permutation per (seed, epoch),
     posenet.data.EpochSampler), read by persistent loader processes that read ahead across the epochs'
-    ends."""
+    ends: `cfg.workers`, on a CPU no more than the training threads leave cores for (loader_workers)."""
     o = cfg.optim
     sampler = EpochSampler(len(dataset), o.batch_size, seed=o.seed)
     sampler.set_epoch(*divmod(step, per_epoch))
     loader = DataLoader(
-        dataset, batch_size=o.batch_size, sampler=sampler, collate_fn=collate, **loader_processes(cfg.workers)
+        dataset,
+        batch_size=o.batch_size,
+        sampler=sampler,
+        collate_fn=collate,
+        **loader_processes(loader_workers(cfg.workers, device)),
     )
     return iter(loader)
 
