@@ -15,14 +15,15 @@ Stages, each written to --json as soon as it is measured (a killed run keeps wha
   4. `posenet train` itself for --train-steps steps: samples/s from its own log (loader waits included),
      the first --skip steps (start-up, compilation) left out; with --against TREE (a checkout of another
      commit, e.g. `git worktree add /tmp/old 3a10b4b`), `posenet train --config CONFIG` from this tree and
-     from TREE in alternating rounds, each with its own package's defaults (OpenMP waiting included: the
-     children get no GOMP_SPINCOUNT or OMP_WAIT_POLICY), and the ratio of their median steps;
+     from TREE in --rounds alternating rounds (3), each with its own package's defaults (OpenMP waiting
+     included: the children get no GOMP_SPINCOUNT or OMP_WAIT_POLICY), and the ratio of their median
+     steps;
   5. predict by stage on the train split's images at their ground-truth boxes, with the checkpoint that
      stage 4 wrote (decode, crop, pose network, solve; the detector only with --detector).
 
 Usage: python benchmarks/throughput.py [--data DIR] [--workers 2] [--batch 8] [--steps 5] [--samples 300]
        [--config paper|smoke] [--variant V ...] [--candidate CONFIG ...] [--train-steps 200]
-       [--json FILE] [--gpu-check]
+       [--against TREE [--rounds 3]] [--json FILE] [--gpu-check]
 Without --data, 48 samples at 640x480 are rendered with Mitsuba into a temporary folder first. On a CPU
 by default (config smoke); --gpu-check sizes every stage for one short run on a GPU node (paper config,
 both variants, 14 loader processes, batch 24, 200 train steps each: about 5 minutes on one H200).
@@ -58,6 +59,7 @@ from posenet.training.losses import LOSS_TERMS, PmObject, pose_losses
 from posenet.training.train import (
     LAST,
     LOG_FILE,
+    loader_workers,
     make_optimizer,
     memory_format,
     pin_cpu_threads,
@@ -291,6 +293,7 @@ def parse_args() -> argparse.Namespace:
         default=None,
         help="A source tree of another commit: posenet train from it and from this one, side by side.",
     )
+    ap.add_argument("--rounds", type=int, default=BLOCKS, help=f"Alternating rounds of --against [{BLOCKS}].")
     ap.add_argument(
         "--threads",
         type=int,
@@ -344,9 +347,11 @@ def run(args: argparse.Namespace) -> None:
                 except subprocess.CalledProcessError as exc:  # its output went to stderr above
                     res.add(f"posenet train ({name}): failed ({exc})", stage="posenet train", variant=variant)
                     continue
+                started = loader_workers(args.workers, device)  # this process's threads are the child's
                 res.add(
-                    f"posenet train ({name}, batch {cfg.optim.batch_size}, {dev}, {args.workers} loader "
-                    f"processes, steps {args.skip + 1}-{args.train_steps}): {1000 * sec:.1f} ms a step "
+                    f"posenet train ({name}, batch {cfg.optim.batch_size}, {dev}, {started} loader processes"
+                    + (f" of --workers {args.workers}" if started < args.workers else "")
+                    + f", steps {args.skip + 1}-{args.train_steps}): {1000 * sec:.1f} ms a step "
                     f"({rate:.1f} samples/s)",
                     stage="posenet train",
                     variant=variant,
@@ -362,10 +367,10 @@ def run(args: argparse.Namespace) -> None:
 
 def against_line(res: Results, data: Path, config: str, args: argparse.Namespace, dev: str) -> None:
     """Stage 4 side by side: `posenet train --config CONFIG` from this tree and from --against, in
-    BLOCKS alternating rounds; their median seconds a step and the ratio."""
+    --rounds alternating rounds; their median seconds a step and the ratio."""
     trees = {"this tree": None, str(args.against): args.against.resolve()}
     times: dict[str, list[float]] = {k: [] for k in trees}
-    for _ in range(BLOCKS):
+    for _ in range(args.rounds):
         for label, tree in trees.items():
             with tempfile.TemporaryDirectory() as tmp:
                 times[label].append(
@@ -375,7 +380,7 @@ def against_line(res: Results, data: Path, config: str, args: argparse.Namespace
     for label, sec in ((new, t_new), (old, t_old)):
         res.add(
             f"posenet train ({config} config, {dev}, steps {args.skip + 1}-{args.train_steps}, "
-            f"from {label}): {1000 * sec:.1f} ms a step, median of {BLOCKS} alternating rounds "
+            f"from {label}): {1000 * sec:.1f} ms a step, median of {args.rounds} alternating rounds "
             f"({', '.join(f'{1000 * s:.0f}' for s in times[label])})",
             stage="posenet train against",
             tree=label,
