@@ -117,6 +117,9 @@ class OptimConfig:
     grad_centralization: bool = False
     # weight decay on norm weights and biases too, as Ranger does; False: timm's no-decay group for them
     decay_norms_biases: bool = False
+    # the step's forward and losses through torch.compile (posenet.training.capture): on CUDA as CUDA graphs
+    # (mode reduce-overhead), for a GPU that idles between eager mode's kernel launches; one process only
+    compile: bool = False
 
 
 @dataclass

@@ -39,7 +39,8 @@ from posenet.errors import PosenetError
 from posenet.models import PoseNet, create_model
 from posenet.training.amp import Precision
 from posenet.training.budget import PROBE_STEPS, TimeBudget, run_budget
-from posenet.training.losses import LOSS_TERMS, PmObject, pose_losses
+from posenet.training.capture import Losses, compiled_losses, eager_losses
+from posenet.training.losses import LOSS_TERMS, PmObject
 from posenet.training.ranger import Ranger
 from scgen.io import ScgenError, atomic_write_text, check_output, first_missing
 
@@ -265,13 +266,13 @@ def train_step(
     pm: PmObject,
     cfg: TrainConfig,
     precision: Precision | None = None,
+    losses: Losses | None = None,
 ) -> torch.Tensor:
-    """One optimisation step in `precision` (default float32); returns the detached float32 (total, *terms)
+    """One optimisation step in `precision` (default float32) through `losses` (default eager_losses; a
+    run with optim.compile passes its compiled_losses); returns the detached float32 (total, *terms)
     losses. fp16 scales the loss (GradScaler); gradient centralisation sees the unscaled gradients."""
     precision = precision or Precision("off", batch["roi_img"].device)
-    with precision.autocast():
-        out = model(batch["roi_img"], batch["roi_coord2d"])
-        loss, terms = pose_losses(out, batch, pm, cfg.loss)
+    loss, values = (losses or eager_losses(model, pm, cfg.loss, precision))(batch)
     optimizer.zero_grad(set_to_none=True)
     precision.scaler.scale(loss).backward()
     if cfg.optim.grad_centralization:
@@ -279,7 +280,7 @@ def train_step(
         centralize_gradients(optimizer)
     precision.scaler.step(optimizer)
     precision.scaler.update()
-    return torch.stack([loss.detach(), *(terms[k].detach() for k in LOSS_TERMS)]).float()
+    return values
 
 
 def train(
@@ -336,6 +337,7 @@ class _Run:
     step: int  # optimisation steps done
     stop: int  # the step this invocation stops at
     budget: TimeBudget | None = None  # --minutes: the schedule's total, fitted while the run goes
+    losses: Losses | None = None  # optim.compile: the compiled forward and losses (else eager, per step)
     weight_spread: float = 0.0  # largest weight difference between DDP processes, measured at the stop
     startup: StartUp | None = None  # rank 0: where the set-up's seconds went, printed with the first step
 
@@ -377,7 +379,7 @@ def _set_up(
     is the budget's, refitted as the run goes."""
     o = cfg.optim
     clock = StartUp()
-    _refuse(out, o.batch_size, resume, world)
+    _refuse(out, o, resume, world)
     dataset = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
     clock.lap("data (scan, object model)")
     state = load_checkpoint(out / LAST, kind="pose") if resume else None
@@ -394,6 +396,7 @@ def _set_up(
     )
     clock.lap("network" + (f" and {LAST}" if state else ""))
     workers = loader_workers(cfg.data.workers, device)
+    run_pm = pm_loss_points(dataset.obj, device)
     if rank == 0:
         for line in summary_lines(data, cfg, len(dataset), sampler.steps_per_epoch, total, step, stop, device,
                                   precision, world, budget, workers):  # fmt: skip
@@ -406,7 +409,7 @@ def _set_up(
         scheduler=scheduler,
         dataset=dataset,
         sampler=sampler,
-        pm=pm_loss_points(dataset.obj, device),
+        pm=run_pm,
         loader=_loader(dataset, sampler, workers, device, data if cfg.data.loader == "cache" else None),
         workers=workers,
         device=device,
@@ -415,6 +418,7 @@ def _set_up(
         step=step,
         stop=stop,
         budget=budget,
+        losses=compiled_losses(model, run_pm, cfg.loss, precision, device) if o.compile else None,
     )
     clock.lap("loader")
     run.startup = clock if rank == 0 else None
@@ -468,14 +472,20 @@ def summary_lines(
         )
         + ")"
         + (f", {world} DDP processes" if world > 1 else "")
-        + f"; precision: {precision.label} (optim.amp {o.amp})",
+        + f"; precision: {precision.label} (optim.amp {o.amp})"
+        + (
+            f"; step compiled ({'CUDA graphs' if device.type == 'cuda' else 'inductor'})" if o.compile else ""
+        ),
     ]
 
 
-def _refuse(out: Path, batch_size: int, resume: bool, world: int) -> None:
-    """A global batch that does not split over the processes, or a run folder that cannot be used."""
-    if batch_size % world:
-        raise PosenetError(f"batch size {batch_size} does not split over {world} processes")
+def _refuse(out: Path, o: OptimConfig, resume: bool, world: int) -> None:
+    """A global batch that does not split over the processes, a compiled step under DDP (its gradient
+    hooks inside CUDA graphs: not built), or a run folder that cannot be used."""
+    if o.batch_size % world:
+        raise PosenetError(f"batch size {o.batch_size} does not split over {world} processes")
+    if o.compile and world > 1:
+        raise PosenetError(f"optim.compile trains in one process, not {world} DDP processes")
     check_run_folder(out, resume)
 
 
@@ -659,7 +669,8 @@ def _steps(run: _Run, log: RunLog | None) -> Iterator[tuple[bool, bool]]:
         if run.startup is not None:
             run.startup.lap(f"first batch {len(batch['roi_img'])} images ({run.workers} loader processes)")
         scale = run.precision.loss_scale()
-        values = train_step(run.net, run.optimizer, _to(batch, run.device), run.pm, run.cfg, run.precision)
+        batch = _to(batch, run.device)
+        values = train_step(run.net, run.optimizer, batch, run.pm, run.cfg, run.precision, run.losses)
         if run.startup is not None:  # what the first minutes went on, once
             run.startup.lap("first step")
             tqdm.write(run.startup.line())
