@@ -8,16 +8,16 @@ Stages, each written to --json as soon as it is measured (a killed run keeps wha
      CPU, 3a10b4b's step beside it (timm's Lookahead(RAdam), every step's losses read back at once),
      timed in alternating blocks in one process, with their ratio (and each --candidate config's step
      in the same blocks, with 3a10b4b's step of --config over it: what less arithmetic would buy); on
-     CUDA the step captured
-     (torch.compile mode="reduce-overhead": CUDA graphs) beside the eager one. Printed as
+     CUDA the step captured as `optim.compile` does (torch.compile mode="reduce-overhead": CUDA graphs)
+     beside the eager one. Printed as
      `train step (CONFIG, batch B, DEVICE, ...): X ms (Y samples/s)`, posenet_dataloader.py's form;
   3. the optimizer step alone on that model, timm's against posenet's (same gradients);
   4. `posenet train` itself for --train-steps steps: samples/s from its own log (loader waits included),
-     the first --skip steps (start-up, compilation) left out; with --against TREE (a checkout of another
-     commit, e.g. `git worktree add /tmp/old 3a10b4b`), `posenet train --config CONFIG` from this tree and
-     from TREE in --rounds alternating rounds (3), each with its own package's defaults (OpenMP waiting
-     included: the children get no GOMP_SPINCOUNT or OMP_WAIT_POLICY), and the ratio of their median
-     steps;
+     the first --skip steps (start-up, compilation) left out, on CUDA also with optim.compile (last); with
+     --against TREE (a checkout of another commit, e.g. `git worktree add /tmp/old 3a10b4b`), `posenet
+     train --config CONFIG` from this tree and from TREE in --rounds alternating rounds (3), each with its
+     own package's defaults (OpenMP waiting included: the children get no GOMP_SPINCOUNT or
+     OMP_WAIT_POLICY), and the ratio of their median steps;
   5. predict by stage on the train split's images at their ground-truth boxes, with the checkpoint that
      stage 4 wrote (decode, crop, pose network, solve; the detector only with --detector).
 
@@ -55,7 +55,8 @@ from posenet.data import open_split
 from posenet.data.layout import scan_split
 from posenet.models import create_model
 from posenet.training.amp import Precision
-from posenet.training.losses import LOSS_TERMS, PmObject, pose_losses
+from posenet.training.capture import compiled_losses
+from posenet.training.losses import PmObject, pose_losses
 from posenet.training.train import (
     LAST,
     LOG_FILE,
@@ -138,29 +139,13 @@ def eager_step(cfg: TrainConfig, batch: dict, pm: PmObject, precision: Precision
 
 
 def captured_step(cfg: TrainConfig, batch: dict, pm: PmObject, precision: Precision) -> Step:
-    """The step with forward and losses (and through AOTAutograd the backward) compiled with
-    mode="reduce-overhead", which records them as CUDA graphs and replays them; the fused optimizer
-    runs eagerly after. Shapes are fixed (one batch), so the graphs are recorded once."""
+    """`posenet train`'s step with optim.compile: forward and losses (and through AOTAutograd the backward)
+    compiled with mode="reduce-overhead", which records them as CUDA graphs and replays them; the fused
+    optimizer runs eagerly after. Shapes are fixed (one batch), so the graphs are recorded once."""
     model = fresh_model(cfg, batch["roi_img"].device)
     opt, _ = make_optimizer(model, cfg.optim, 10**6)
-
-    def forward(batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
-        with precision.autocast():
-            out = model(batch["roi_img"], batch["roi_coord2d"])
-            loss, terms = pose_losses(out, batch, pm, cfg.loss)
-        return loss, torch.stack([loss.detach(), *(terms[k].detach() for k in LOSS_TERMS)]).float()
-
-    compiled = torch.compile(forward, mode="reduce-overhead")
-
-    def step() -> torch.Tensor:
-        torch.compiler.cudagraph_mark_step_begin()
-        loss, values = compiled(batch)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        return values.clone()  # a replay overwrites the graph's outputs
-
-    return step
+    losses = compiled_losses(model, pm, cfg.loss, precision, batch["roi_img"].device)
+    return lambda: train_step(model, opt, batch, pm, cfg, precision, losses)
 
 
 def sync(device: torch.device) -> None:
@@ -330,6 +315,7 @@ def run(args: argparse.Namespace) -> None:
     threads = torch.get_num_threads()
     process_line(res, data, args)
     torch.set_num_threads(threads)
+    trained: list[tuple[TrainConfig, str, str | None]] = []  # what stage 4 trained, for the compiled runs
     for variant in args.variant or [None]:
         cfg = step_config(config, variant, args.threads)
         if device.type == "cpu":
@@ -338,31 +324,54 @@ def run(args: argparse.Namespace) -> None:
         candidates = {c: step_config(c, variant, cfg.optim.threads) for c in args.candidate}
         step_lines(res, data, cfg, name, dev, device, args.steps, candidates)
         if args.train_steps:
+            cfg.data.workers = args.workers
+            cfg.optim.ckpt_every = 10**6  # last.pt once, at the stop: not every epoch of a small set
             with tempfile.TemporaryDirectory() as tmp:
                 run = Path(tmp) / "run"
-                cfg.data.workers = args.workers
-                cfg.optim.ckpt_every = 10**6  # last.pt once, at the stop: not every epoch of a small set
-                try:
-                    rate, sec = train_rate(data, cfg, args.train_steps, args.skip, run)
-                except subprocess.CalledProcessError as exc:  # its output went to stderr above
-                    res.add(f"posenet train ({name}): failed ({exc})", stage="posenet train", variant=variant)
-                    continue
-                started = loader_workers(args.workers, device)  # this process's threads are the child's
-                res.add(
-                    f"posenet train ({name}, batch {cfg.optim.batch_size}, {dev}, {started} loader processes"
-                    + (f" of --workers {args.workers}" if started < args.workers else "")
-                    + f", steps {args.skip + 1}-{args.train_steps}): {1000 * sec:.1f} ms a step "
-                    f"({rate:.1f} samples/s)",
-                    stage="posenet train",
-                    variant=variant,
-                    ms=1000 * sec,
-                    samples_s=rate,
-                )
-                if args.predict:
+                if train_line(res, data, cfg, name, dev, device, args, variant, run) and args.predict:
                     predict_line(res, data, cfg, run / LAST, args, name, dev, device, variant)
+            trained.append((cfg, name, variant))
+    if device.type == "cuda":  # posenet train with optim.compile (CUDA graphs), once the rest is written
+        for cfg, name, variant in trained:
+            cfg.optim.compile = True
+            with tempfile.TemporaryDirectory() as tmp:
+                train_line(
+                    res, data, cfg, name + ", optim.compile", dev, device, args, variant, Path(tmp) / "run"
+                )
     if args.against is not None and args.train_steps:
         against_line(res, data, config, args, dev)
     print("\n".join(["", f"== throughput on {dev} ({config} config)", *res.lines]))
+
+
+def train_line(
+    res: Results,
+    data: Path,
+    cfg: TrainConfig,
+    name: str,
+    dev: str,
+    device: torch.device,
+    args: argparse.Namespace,
+    variant: str | None,
+    run: Path,
+) -> bool:
+    """Stage 4: `posenet train` with `cfg` into `run`, its line; whether it trained."""
+    try:
+        rate, sec = train_rate(data, cfg, args.train_steps, args.skip, run)
+    except subprocess.CalledProcessError as exc:  # its output went to stderr above
+        res.add(f"posenet train ({name}): failed ({exc})", stage="posenet train", variant=variant)
+        return False
+    started = loader_workers(args.workers, device)  # this process's threads are the child's
+    res.add(
+        f"posenet train ({name}, batch {cfg.optim.batch_size}, {dev}, {started} loader processes"
+        + (f" of --workers {args.workers}" if started < args.workers else "")
+        + f", steps {args.skip + 1}-{args.train_steps}): {1000 * sec:.1f} ms a step ({rate:.1f} samples/s)",
+        stage="posenet train",
+        variant=variant,
+        compiled=cfg.optim.compile,
+        ms=1000 * sec,
+        samples_s=rate,
+    )
+    return True
 
 
 def against_line(res: Results, data: Path, config: str, args: argparse.Namespace, dev: str) -> None:
