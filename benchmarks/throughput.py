@@ -40,6 +40,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +89,17 @@ class Results:
         self.data["rows"].append({"line": line, **values})
         if self.path is not None:
             self.path.write_text(json.dumps(self.data, indent=1))
+
+
+@dataclass
+class Bench:
+    """What every stage reads: the table it adds to, the data, the arguments, the device and its name."""
+
+    res: Results
+    data: Path
+    args: argparse.Namespace
+    device: torch.device
+    dev: str
 
 
 def timm_optimizer(model: torch.nn.Module, cfg: TrainConfig) -> torch.optim.Optimizer:
@@ -311,9 +323,9 @@ def run(args: argparse.Namespace) -> None:
         "config": config,
         "args": {k: str(v) for k, v in vars(args).items()},
     }
-    res = Results(args.json, header)
+    b = Bench(Results(args.json, header), data, args, device, dev)
     threads = torch.get_num_threads()
-    process_line(res, data, args)
+    process_line(b)
     torch.set_num_threads(threads)
     trained: list[tuple[TrainConfig, str, str | None]] = []  # what stage 4 trained, for the compiled runs
     for variant in args.variant or [None]:
@@ -321,48 +333,36 @@ def run(args: argparse.Namespace) -> None:
         if device.type == "cpu":
             pin_cpu_threads(cfg.optim.threads)  # as training: one thread per core
         name = f"{config} config" + (f", {variant}" if variant else "")
-        candidates = {c: step_config(c, variant, cfg.optim.threads) for c in args.candidate}
-        step_lines(res, data, cfg, name, dev, device, args.steps, candidates)
+        step_lines(b, cfg, name, {c: step_config(c, variant, cfg.optim.threads) for c in args.candidate})
         if args.train_steps:
             cfg.data.workers = args.workers
             cfg.optim.ckpt_every = 10**6  # last.pt once, at the stop: not every epoch of a small set
             with tempfile.TemporaryDirectory() as tmp:
                 run = Path(tmp) / "run"
-                if train_line(res, data, cfg, name, dev, device, args, variant, run) and args.predict:
-                    predict_line(res, data, cfg, run / LAST, args, name, dev, device, variant)
+                if train_line(b, cfg, name, variant, run) and args.predict:
+                    predict_line(b, cfg, run / LAST, name, variant)
             trained.append((cfg, name, variant))
     if device.type == "cuda":  # posenet train with optim.compile (CUDA graphs), once the rest is written
         for cfg, name, variant in trained:
             cfg.optim.compile = True
             with tempfile.TemporaryDirectory() as tmp:
-                train_line(
-                    res, data, cfg, name + ", optim.compile", dev, device, args, variant, Path(tmp) / "run"
-                )
+                train_line(b, cfg, name + ", optim.compile", variant, Path(tmp) / "run")
     if args.against is not None and args.train_steps:
-        against_line(res, data, config, args, dev)
-    print("\n".join(["", f"== throughput on {dev} ({config} config)", *res.lines]))
+        against_line(b, config)
+    print("\n".join(["", f"== throughput on {dev} ({config} config)", *b.res.lines]))
 
 
-def train_line(
-    res: Results,
-    data: Path,
-    cfg: TrainConfig,
-    name: str,
-    dev: str,
-    device: torch.device,
-    args: argparse.Namespace,
-    variant: str | None,
-    run: Path,
-) -> bool:
+def train_line(b: Bench, cfg: TrainConfig, name: str, variant: str | None, run: Path) -> bool:
     """Stage 4: `posenet train` with `cfg` into `run`, its line; whether it trained."""
+    args = b.args
     try:
-        rate, sec = train_rate(data, cfg, args.train_steps, args.skip, run)
+        rate, sec = train_rate(b.data, cfg, args.train_steps, args.skip, run)
     except subprocess.CalledProcessError as exc:  # its output went to stderr above
-        res.add(f"posenet train ({name}): failed ({exc})", stage="posenet train", variant=variant)
+        b.res.add(f"posenet train ({name}): failed ({exc})", stage="posenet train", variant=variant)
         return False
-    started = loader_workers(args.workers, device)  # this process's threads are the child's
-    res.add(
-        f"posenet train ({name}, batch {cfg.optim.batch_size}, {dev}, {started} loader processes"
+    started = loader_workers(args.workers, b.device)  # this process's threads are the child's
+    b.res.add(
+        f"posenet train ({name}, batch {cfg.optim.batch_size}, {b.dev}, {started} loader processes"
         + (f" of --workers {args.workers}" if started < args.workers else "")
         + f", steps {args.skip + 1}-{args.train_steps}): {1000 * sec:.1f} ms a step ({rate:.1f} samples/s)",
         stage="posenet train",
@@ -374,50 +374,44 @@ def train_line(
     return True
 
 
-def against_line(res: Results, data: Path, config: str, args: argparse.Namespace, dev: str) -> None:
+def against_line(b: Bench, config: str) -> None:
     """Stage 4 side by side: `posenet train --config CONFIG` from this tree and from --against, in
     --rounds alternating rounds; their median seconds a step and the ratio."""
+    args = b.args
     trees = {"this tree": None, str(args.against): args.against.resolve()}
     times: dict[str, list[float]] = {k: [] for k in trees}
     for _ in range(args.rounds):
         for label, tree in trees.items():
             with tempfile.TemporaryDirectory() as tmp:
                 times[label].append(
-                    train_rate(data, config, args.train_steps, args.skip, Path(tmp) / "run", tree, True)[1]
+                    train_rate(b.data, config, args.train_steps, args.skip, Path(tmp) / "run", tree, True)[1]
                 )
     (new, t_new), (old, t_old) = ((k, statistics.median(v)) for k, v in times.items())
     for label, sec in ((new, t_new), (old, t_old)):
-        res.add(
-            f"posenet train ({config} config, {dev}, steps {args.skip + 1}-{args.train_steps}, "
+        b.res.add(
+            f"posenet train ({config} config, {b.dev}, steps {args.skip + 1}-{args.train_steps}, "
             f"from {label}): {1000 * sec:.1f} ms a step, median of {args.rounds} alternating rounds "
             f"({', '.join(f'{1000 * s:.0f}' for s in times[label])})",
             stage="posenet train against",
             tree=label,
             ms=1000 * sec,
         )
-    res.add(f"  ratio: {old} / {new} = {t_old / t_new:.2f}", stage="posenet train ratio", ratio=t_old / t_new)
+    b.res.add(
+        f"  ratio: {old} / {new} = {t_old / t_new:.2f}", stage="posenet train ratio", ratio=t_old / t_new
+    )
 
 
-def predict_line(
-    res: Results,
-    data: Path,
-    cfg: TrainConfig,
-    ckpt: Path,
-    args: argparse.Namespace,
-    name: str,
-    dev: str,
-    device: torch.device,
-    variant: str | None,
-) -> None:
+def predict_line(b: Bench, cfg: TrainConfig, ckpt: Path, name: str, variant: str | None) -> None:
     """Stage 5: predict by stage on the checkpoint stage 4 wrote (a line saying why where it cannot)."""
-    what = f"predict ({name}, {dev}, torch, " + ("detector" if args.detector else "ground-truth boxes") + ")"
+    detector = b.args.detector
+    what = f"predict ({name}, {b.dev}, torch, " + ("detector" if detector else "ground-truth boxes") + ")"
     try:
-        ms = predict_stages(data, cfg.data.obj_id, ckpt, args.detector, device, args.predict)
+        ms = predict_stages(b.data, cfg.data.obj_id, ckpt, detector, b.device, b.args.predict)
     except Exception as exc:  # scipy missing on a node, say: a line of the table, not the end of it
-        res.add(f"{what}: not measured ({exc!r})"[:400], stage="predict", variant=variant)
+        b.res.add(f"{what}: not measured ({exc!r})"[:400], stage="predict", variant=variant)
         return
     stages = ", ".join(f"{k} {v:.1f}" for k, v in ms.items() if k != "images_s")
-    res.add(
+    b.res.add(
         f"{what}: {ms['images_s']:.1f} images/s; ms an image: {stages}",
         stage="predict",
         variant=variant,
@@ -425,24 +419,25 @@ def predict_line(
     )
 
 
-def process_line(res: Results, data: Path, args: argparse.Namespace) -> None:
+def process_line(b: Bench) -> None:
     """Stage 1: the loader, one process and --workers processes."""
     try:
         from harness.pose import loader_rate, paper_dataset, process_rate  # scipy: a GPU node may lack it
     except ModuleNotFoundError as exc:
-        res.add(f"loader: not measured ({exc})", stage="loader")
+        b.res.add(f"loader: not measured ({exc})", stage="loader")
         return
     worker_init(0)  # one thread, as in a loader process (and OpenCV's pool stays unused before the fork)
-    ds = paper_dataset(data)
+    args = b.args
+    ds = paper_dataset(b.data)
     rate = process_rate(ds, args.samples)
-    res.add(
+    b.res.add(
         f"loader, 1 process (paper augmentations, 256/64): {rate:.1f} samples/s",
         stage="loader",
         processes=1,
         samples_s=rate,
     )
     rate = loader_rate(ds, args.workers, args.samples, args.batch)
-    res.add(
+    b.res.add(
         f"loader, {args.workers} worker processes, batches of {args.batch}: {rate:.1f} samples/s",
         stage="loader",
         processes=args.workers,
@@ -460,18 +455,10 @@ def step_config(name: str, variant: str | None, threads: int | None) -> TrainCon
     return cfg
 
 
-def step_lines(
-    res: Results,
-    data: Path,
-    cfg: TrainConfig,
-    name: str,
-    dev: str,
-    device: torch.device,
-    n: int,
-    candidates: dict[str, TrainConfig],
-) -> None:
+def step_lines(b: Bench, cfg: TrainConfig, name: str, candidates: dict[str, TrainConfig]) -> None:
     """Stages 2 and 3: the step compared (old and new on a CPU, with any candidate configs' steps;
     eager and captured on CUDA), then the optimizer step alone."""
+    res, data, device, dev, n = b.res, b.data, b.device, b.dev, b.args.steps
     batch, pm, precision, bs = step_setup(data, cfg, device)
     steps = {"eager (posenet)": eager_step(cfg, batch, pm, precision, old=False)}
     old = "eager, 3a10b4b's step (timm Ranger, per-step readback)"
@@ -505,8 +492,8 @@ def step_lines(
         )
     compared = [(k, t) for k, t in times.items() if k not in named.values()]  # --config's two steps
     if len(compared) == 2:
-        (a, ta), (b, tb) = compared
-        res.add(f"  ratio: {b} / {a} = {tb / ta:.2f}", stage="step ratio", ratio=tb / ta)
+        (new, t_new), (old_step, t_old) = compared
+        res.add(f"  ratio: {old_step} / {new} = {t_old / t_new:.2f}", stage="step ratio", ratio=t_old / t_new)
     for label, what in named.items():
         if what in times and old in times:
             ratio = times[old] / times[what]
