@@ -18,6 +18,7 @@ from float_bounds import forward_rel
 
 from posenet.checkpoint import load_checkpoint
 from posenet.cli import main
+from posenet.data.boxes import box_edges, edges_box
 from posenet.detection.detect import (
     Detection,
     box_metrics,
@@ -40,6 +41,7 @@ from posenet.detection.detector import (
 from posenet.detection.segmenter import JOIN_SHARE, mask_box
 from posenet.evaluation.evaluate import by_factor, evaluate
 from posenet.evaluation.metrics import headline_add
+from posenet.predict.predictor import detector_box
 from scgen.cli import main as scgen_main
 
 MASK = "mask-timm"
@@ -336,3 +338,15 @@ def test_the_light_preset_runs_the_cpu_network_at_half_the_side_with_two_conv_he
         nets[name] = (tuple(sizes[0][-2:]), len(convs))
     # torchvision's transform resizes to the short side min_size (long side <= max_size), padded to 32
     assert nets == {"light": ((128, 160), 2), "cpu": ((256, 320), 4)}
+
+
+def test_a_detector_s_edges_give_the_box_of_the_pixels_it_found() -> None:
+    """Detectors give pixel edges where pixel i spans [i, i + 1) (torchvision's boxes; mask_box below), the
+    convention they learn (target_boxes). The box predict crops around is the box of those pixels, the one
+    `posenet boxes --detector` writes (detection_entries): a target over pixels x 30..44, y 10..19 is
+    [30, 10, 15, 10], not half a pixel off."""
+    prob = np.zeros((48, 64))
+    prob[10:20, 30:45] = 0.9
+    edges, score = mask_box(prob, 0.1)
+    assert detector_box(edges, score) == ((30.0, 10.0, 15.0, 10.0), 0.9)
+    assert edges_box(box_edges((30.0, 10.0, 15.0, 10.0))) == (30.0, 10.0, 15.0, 10.0)

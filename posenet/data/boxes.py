@@ -58,6 +58,20 @@ def boxes_from_gt(instances: list[Instance], noise: float = 0.0, seed: int = 0) 
     return out
 
 
+def box_edges(box: Box) -> tuple[float, float, float, float]:
+    """A box [x, y, w, h] (pixels x .. x + w - 1) as the pixel edges [x0, y0, x1, y1] a detector learns and
+    gives, where pixel i spans [i, i + 1) (torchvision's boxes; the mask detector's `mask_box`)."""
+    x, y, w, h = (float(v) for v in box)
+    return x, y, x + w, y + h
+
+
+def edges_box(edges: np.ndarray | tuple[float, ...]) -> Box:
+    """A detector's pixel edges [x0, y0, x1, y1] as the box [x, y, w, h] of the pixels they span (the
+    inverse of `box_edges`): what `posenet boxes --detector` writes and predict crops around."""
+    x0, y0, x1, y1 = (float(v) for v in edges)
+    return x0, y0, x1 - x0, y1 - y0
+
+
 def clip_box(box: Box, size: tuple[int, int]) -> Box | None:
     """The part of `box` inside an image of `size` (width, height), or None when none is: the amodal box
     a detector can see (GDRNPP's convention), since no pixel past the border is in the image."""

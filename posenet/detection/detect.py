@@ -22,7 +22,7 @@ from torchvision.ops.boxes import clip_boxes_to_image
 from tqdm import tqdm
 
 from posenet.checkpoint import load_checkpoint
-from posenet.data.boxes import miss_entry
+from posenet.data.boxes import edges_box, miss_entry
 from posenet.data.layout import Instance
 from posenet.detection.detector import (
     DetectionDataset,
@@ -213,8 +213,7 @@ def detection_entries(dets: list[Detection], obj_id: int, source: str) -> list[d
         if d.box is None:
             out.append(miss_entry(*d.key, obj_id, d.time_s, source))
             continue
-        x0, y0, x1, y1 = d.box
-        bbox = [round(v, 2) for v in (x0, y0, x1 - x0, y1 - y0)]
+        bbox = [round(v, 2) for v in edges_box(d.box)]
         out.append({"scene_id": d.key[0], "image_id": d.key[1], "category_id": obj_id, "bbox": bbox,
                     "score": round(d.score, 4), "time": d.time_s, "source": source})  # fmt: skip
     return out

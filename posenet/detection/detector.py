@@ -32,7 +32,7 @@ from torchvision.ops import FeaturePyramidNetwork
 
 from posenet.config import OptimConfig, override_fields, plain, read_config_file
 from posenet.data.augment import brightness_contrast
-from posenet.data.boxes import clip_box
+from posenet.data.boxes import box_edges, clip_box
 from posenet.data.io import read_bgr, read_mask
 from posenet.data.layout import Instance, scan_split
 from posenet.detection.segmenter import MaskDetector
@@ -224,13 +224,12 @@ def target_boxes(instances: list[Instance]) -> np.ndarray:
     """(n, 4) float32 [x0, y0, x1, y1] pixel-edge boxes the detector learns: of the instances with a visible
     pixel, the whole object's box (bbox_obj) clipped to the image (posenet.data.boxes.clip_box)."""
     clipped = [clip_box(i.bbox_obj, i.image_size) for i in instances if i.px_count_visib > 0]
-    boxes = [(x, y, x + w, y + h) for box in clipped if box is not None for x, y, w, h in [box]]
-    return np.array(boxes, np.float32).reshape(-1, 4)
+    return np.array([box_edges(box) for box in clipped if box is not None], np.float32).reshape(-1, 4)
 
 
 def visible_boxes(instances: list[Instance]) -> np.ndarray:
     """(n, 4) float32 [x0, y0, x1, y1] pixel-edge boxes of the instances with a visible pixel (bbox_visib)."""
-    boxes = [(x, y, x + w, y + h) for i in instances if i.px_count_visib > 0 for x, y, w, h in [i.bbox_visib]]
+    boxes = [box_edges(i.bbox_visib) for i in instances if i.px_count_visib > 0]
     return np.array(boxes, np.float32).reshape(-1, 4)
 
 

@@ -22,7 +22,7 @@ import torch
 
 from posenet.checkpoint import load_checkpoint, model_from_state
 from posenet.config import config_from_dict
-from posenet.data.boxes import Box
+from posenet.data.boxes import Box, edges_box
 from posenet.data.camera import (
     Camera,
     make_camera,
@@ -248,10 +248,9 @@ def detect_box(detector: Detector | None, image: np.ndarray) -> tuple[Box, float
 
 
 def detector_box(edges: np.ndarray, score: float) -> tuple[Box, float]:
-    """A detector's [x0, y0, x1, y1] pixel edges as a posenet box [x, y, w, h], covering pixels x .. x + w - 1
-    (centres at integers), with its score."""
-    x0, y0, x1, y1 = edges
-    return (float(x0) + 0.5, float(y0) + 0.5, float(x1 - x0), float(y1 - y0)), score
+    """A detector's [x0, y0, x1, y1] pixel edges as the box [x, y, w, h] of the pixels they span
+    (`edges_box`: the box `posenet boxes --detector` writes for the same image), with its score."""
+    return edges_box(edges), score
 
 
 def onnx_network(path: Path, input_res: int) -> Network:
