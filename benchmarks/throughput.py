@@ -465,11 +465,13 @@ def step_lines(b: Bench, cfg: TrainConfig, name: str, candidates: dict[str, Trai
     named = {label: f"eager (posenet), config {label}" for label in candidates}
     if device.type == "cpu":
         steps[old] = eager_step(cfg, batch, pm, precision, old=True)
-        for label, candidate in candidates.items():
-            c_batch, c_pm, c_precision, _ = step_setup(data, candidate, device)
-            steps[named[label]] = eager_step(candidate, c_batch, c_pm, c_precision, old=False)
     else:
         steps["captured (torch.compile reduce-overhead)"] = captured_step(cfg, batch, pm, precision)
+    shown = {what: (bs, precision.label) for what in steps}  # each step's batch size and precision
+    for label, candidate in candidates.items() if device.type == "cpu" else ():
+        c_batch, c_pm, c_precision, c_bs = step_setup(data, candidate, device)
+        steps[named[label]] = eager_step(candidate, c_batch, c_pm, c_precision, old=False)
+        shown[named[label]] = (c_bs, c_precision.label)
     times: dict[str, float] = {}
     for what, step in steps.items():
         try:
@@ -482,13 +484,14 @@ def step_lines(b: Bench, cfg: TrainConfig, name: str, candidates: dict[str, Trai
             )
     times = compare_steps({k: steps[k] for k in times}, n, device, warm=0)
     for what, sec in times.items():
+        size, label = shown[what]
         res.add(
-            f"train step ({name}, batch {bs}, {dev}, {precision.label}, {what}): "
-            f"{1000 * sec:.1f} ms ({bs / sec:.1f} samples/s)",
+            f"train step ({name}, batch {size}, {dev}, {label}, {what}): "
+            f"{1000 * sec:.1f} ms ({size / sec:.1f} samples/s)",
             stage="step",
             what=what,
             ms=1000 * sec,
-            samples_s=bs / sec,
+            samples_s=size / sec,
         )
     compared = [(k, t) for k, t in times.items() if k not in named.values()]  # --config's two steps
     if len(compared) == 2:
