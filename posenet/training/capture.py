@@ -40,14 +40,12 @@ def compiled_losses(
     cfg: LossConfig,
     precision: Precision,
     device: torch.device,
-    backend: str = "inductor",
 ) -> Losses:
     """`eager_losses` through torch.compile: CUDA graphs on a CUDA `device` (mode reduce-overhead),
-    inductor's fused kernels elsewhere. `backend` is torch.compile's (the tests' "eager" checks the
-    wrapping without code generation)."""
+    inductor's fused kernels elsewhere."""
     cuda = device.type == "cuda"
     compiled = torch.compile(
-        eager_losses(model, pm, cfg, precision), mode="reduce-overhead" if cuda else None, backend=backend
+        eager_losses(model, pm, cfg, precision), mode="reduce-overhead" if cuda else None
     )
 
     def losses(batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
