@@ -133,7 +133,7 @@ def mitsuba() -> Finding:
         return Finding(WARN, "mitsuba", detail, install("mitsuba"))
     from scgen.render.mitsuba.llvm import LLVM_VARIANT, check_mitsuba
 
-    setup = check_mitsuba()
+    setup = check_mitsuba(fresh=True)
     if not setup.libllvm.tested:
         return Finding(WARN, "mitsuba", str(setup.notice))
     if setup.variant == LLVM_VARIANT:

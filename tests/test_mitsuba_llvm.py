@@ -7,21 +7,27 @@ Dr.Jit refuses 14; both are tested where the machine has them, a path that does 
 from __future__ import annotations
 
 import glob
+import json
 import os
 import shutil
 import subprocess
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 import pytest
 
 from scgen.render.mitsuba.llvm import (
+    CACHE_ENV,
     LIBLLVM_ENV,
     LIBLLVM_GLOBS,
     VERDICT_ENV,
     Libllvm,
     libllvm_major,
+    machine_key,
     newer_libllvms,
+    probe_libllvm,
+    verdict_file,
 )
 from scgen.run.runner import RenderJob, run_render
 
@@ -101,11 +107,45 @@ def test_a_check_that_fails_before_mitsuba_names_its_own_cause_without_libllvm_a
     the render then stops on the same cause."""
     without_model = shutil.ignore_patterns("__pycache__", "spacecraft")  # the package data left out
     shutil.copytree(ROOT / "scgen", tmp_path / "pkg" / "scgen", ignore=without_model)
-    # run outside the checkout, whose scgen `python -m` would put first on the path
-    done = scgen(*render_args(tmp_path / "ds"), cwd=tmp_path, PYTHONPATH=str(tmp_path / "pkg"))
+    # run outside the checkout, whose scgen `python -m` would put first on the path; a machine scgen has
+    # not run on (no verdict file), so the check runs
+    env = {"PYTHONPATH": str(tmp_path / "pkg"), CACHE_ENV: str(tmp_path / "cache")}
+    done = scgen(*render_args(tmp_path / "ds"), cwd=tmp_path, **env)
     lines = done.stderr.splitlines()
     notices = [line for line in lines if line.startswith("scgen: ")]
     assert done.returncode == 1 and len(notices) == 1, done.stderr
     assert notices[0].startswith("scgen: libLLVM not checked: its test render failed before Mitsuba started:")
     assert "bundled model missing" in notices[0] and "libllvm19" not in done.stderr
     assert lines[-1].startswith("Error: bundled model missing")
+
+
+def test_a_libllvm_that_rendered_is_trusted_from_the_verdict_file_until_the_machine_changes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
+    monkeypatch.delenv(LIBLLVM_ENV, raising=False)
+    first = probe_libllvm(None)  # a real test render in a child process
+    if first.error is not None:
+        pytest.skip(f"Dr.Jit's own libLLVM does not render here: {first.error}")
+    verdicts = json.loads(verdict_file().read_text())
+    assert verdicts == {machine_key(None): asdict(first)}
+    # the next probe answers from the file: an entry changed there comes back as it is written
+    verdicts[machine_key(None)]["version"] = "as the file says"
+    verdict_file().write_text(json.dumps(verdicts))
+    assert probe_libllvm(None).version == "as the file says"
+    assert probe_libllvm(None, fresh=True) == first  # scgen doctor renders again
+    # what the verdict rests on changes: another search path for the loader, another libLLVM asked for
+    key = machine_key(None)
+    assert machine_key(first.path) != key
+    monkeypatch.setenv("LD_LIBRARY_PATH", str(tmp_path))
+    assert machine_key(None) != key
+
+
+def test_a_failed_probe_leaves_no_verdict(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    """A libLLVM that cannot render is probed again next time (its failure may have passed): a file that is
+    not a libLLVM fails the test render, and nothing is written."""
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
+    fake = tmp_path / "libLLVM.so.99"
+    fake.write_bytes(b"not a shared library")
+    assert probe_libllvm(str(fake)).error is not None
+    assert not verdict_file().exists()

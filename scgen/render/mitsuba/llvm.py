@@ -7,23 +7,31 @@ the LLVM variant (scgen.render.probe). When drjit's own pick fails and DRJIT_LIB
 the newer libLLVMs on the machine are tried, newest first, and the first that renders is set in
 DRJIT_LIBLLVM_PATH; otherwise Mitsuba renders with scalar_rgb, after one line saying why and how to get
 the fast path. The verdict is kept in the environment: worker processes started later take it over
-instead of probing again.
+instead of probing again. A libLLVM that rendered is also kept on disk (verdict_file, ~3 s saved per
+run): the next process trusts it while nothing it depended on has changed (the versions of Dr.Jit and
+Mitsuba, the libLLVM asked for, every libLLVM file on the machine, the loader's search path).
 """
 
 from __future__ import annotations
 
 import functools
 import glob
+import hashlib
+import importlib.metadata
 import json
 import os
 import re
 import sys
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
+from scgen.io import atomic_write_text
 from scgen.render.probe import probe
 
 LIBLLVM_ENV = "DRJIT_LIBLLVM_PATH"  # Dr.Jit's own setting
 VERDICT_ENV = "SCGEN_MITSUBA_VARIANT"  # the verdict, for the processes this one starts
+RENDER_CODE = Path(__file__).resolve().parents[1]  # scgen/render: what the probe sample runs
+CACHE_ENV = "SCGEN_CACHE_DIR"  # where scgen keeps what it learnt of this machine [XDG_CACHE_HOME/scgen]
 LLVM_VARIANT, SCALAR_VARIANT = "llvm_ad_rgb", "scalar_rgb"
 # where Debian/Ubuntu (also the llvm-N trees), Fedora/RHEL and local builds install libLLVM
 LIBLLVM_GLOBS = ("/usr/lib/*-linux-gnu/libLLVM*.so*", "/usr/lib/llvm-*/lib/libLLVM*.so*",
@@ -74,14 +82,15 @@ def mitsuba_setup() -> MitsubaSetup:
     return setup
 
 
-def check_mitsuba() -> MitsubaSetup:
+def check_mitsuba(fresh: bool = False) -> MitsubaSetup:
     """Probe the libLLVM drjit would load, then newer ones; sets DRJIT_LIBLLVM_PATH to a newer one it picks.
 
     DRJIT_LIBLLVM_PATH, when set, is the user's choice and the only one tried. Once drjit is imported its
-    libLLVM is fixed for this process, so then only that one is tried too.
+    libLLVM is fixed for this process, so then only that one is tried too. `fresh`: probe even where a
+    verdict on disk says the libLLVM renders (`scgen doctor`).
     """
     forced = os.environ.get(LIBLLVM_ENV) or None
-    first = probe_libllvm(forced)
+    first = probe_libllvm(forced, fresh)
     if first.error is None:
         return MitsubaSetup(LLVM_VARIANT, first)
     if not first.tested:  # nothing learnt of the libLLVM: keep drjit's own, say what failed instead
@@ -91,7 +100,7 @@ def check_mitsuba() -> MitsubaSetup:
     newer = newer_libllvms(first)
     search = forced is None and "drjit" not in sys.modules
     for path in newer if search else []:
-        found = probe_libllvm(path)
+        found = probe_libllvm(path, fresh)
         if found.error is None:
             os.environ[LIBLLVM_ENV] = path
             return MitsubaSetup(LLVM_VARIANT, found, f"{cannot}; using {found}, found on this machine")
@@ -100,10 +109,15 @@ def check_mitsuba() -> MitsubaSetup:
     return MitsubaSetup(SCALAR_VARIANT, first, f"{cannot}; {fallback}", fix)
 
 
-def probe_libllvm(path: str | None) -> Libllvm:
-    """Render the probe sample with libLLVM `path` (None: the one drjit picks itself) in a child process."""
+def probe_libllvm(path: str | None, fresh: bool = False) -> Libllvm:
+    """Render the probe sample with libLLVM `path` (None: the one drjit picks itself) in a child process,
+    unless (`fresh` False) the verdict file holds one that rendered on this machine as it is now."""
     if path is not None and not os.path.exists(path):
         return Libllvm(path, None, "no such file")
+    key = machine_key(path)
+    verdicts = read_verdicts()
+    if not fresh and key in verdicts and os.path.exists(verdicts[key]["path"] or "/"):
+        return Libllvm(**verdicts[key])
     env = {k: v for k, v in os.environ.items() if k not in (LIBLLVM_ENV, VERDICT_ENV)}
     if path is not None:
         env[LIBLLVM_ENV] = path
@@ -111,7 +125,55 @@ def probe_libllvm(path: str | None) -> Libllvm:
     loaded = result.facts.get("libllvm") or path
     major = libllvm_major(loaded) if loaded else None  # drjit reports no version for one it refuses
     version = result.facts.get("version") or (str(major) if major else None)
-    return Libllvm(loaded, version, result.error, result.error is None or result.reached_renderer)
+    found = Libllvm(loaded, version, result.error, result.error is None or result.reached_renderer)
+    if found.error is None:  # only a success is kept: a failure may pass (a full disk, a killed child)
+        remember_verdict(key, found)
+    return found
+
+
+def verdict_file() -> Path:
+    """The libLLVMs that rendered, by machine_key: SCGEN_CACHE_DIR, else XDG_CACHE_HOME/scgen or ~/.cache."""
+    cache = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(os.environ.get(CACHE_ENV) or Path(cache) / "scgen") / "libllvm.json"
+
+
+def machine_key(path: str | None) -> str:
+    """A digest of what a probe of libLLVM `path` depends on: Dr.Jit's and Mitsuba's versions, the path,
+    every libLLVM file drjit may load (LIBLLVM_GLOBS and `path`: size and modification time), the dynamic
+    loader's search path and scgen's render code (the kernels it has LLVM compile)."""
+    files = sorted({p for pattern in LIBLLVM_GLOBS for p in glob.glob(pattern)} | ({path} if path else set()))
+    stats = [(p, st.st_size, st.st_mtime_ns) for p in files if (st := _stat(p))]
+    versions = [importlib.metadata.version(name) for name in ("drjit", "mitsuba")]
+    digest = hashlib.sha256()
+    for source in sorted(RENDER_CODE.rglob("*.py")):
+        digest.update(source.read_bytes())
+    facts = [versions, path, os.environ.get("LD_LIBRARY_PATH", ""), stats, digest.hexdigest()]
+    return hashlib.sha256(json.dumps(facts).encode()).hexdigest()
+
+
+def _stat(path: str) -> os.stat_result | None:
+    try:
+        return os.stat(path)
+    except OSError:  # a dangling link
+        return None
+
+
+def read_verdicts() -> dict[str, dict]:
+    """The verdict file's entries ({} where it is missing or unreadable: then each libLLVM is probed)."""
+    try:
+        return json.loads(verdict_file().read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def remember_verdict(key: str, found: Libllvm) -> None:
+    """Add `found` to the verdict file; where it cannot be written (a read-only home) nothing is kept."""
+    path = verdict_file()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(path, json.dumps({**read_verdicts(), key: asdict(found)}, indent=1) + "\n")
+    except OSError:
+        pass
 
 
 def newer_libllvms(than: Libllvm) -> list[str]:
