@@ -19,11 +19,15 @@ Stages, each written to --json as soon as it is measured (a killed run keeps wha
      own package's defaults (OpenMP waiting included: the children get no GOMP_SPINCOUNT or
      OMP_WAIT_POLICY), and the ratio of their median steps;
   5. predict by stage on the train split's images at their ground-truth boxes, with the checkpoint that
-     stage 4 wrote (decode, crop, pose network, solve; the detector only with --detector).
+     stage 4 wrote (decode, crop, pose network, solve; the detector only with --detector);
+  6. with --detector, predict as `posenet predict --onnx --detector-onnx --batch B` runs it (both networks
+     exported by `posenet export`, images decoded in threads) on --predict-data's train images, e.g. a
+     640x480 render while --data is the 320x240 control set: images/s end to end and ms by stage.
 
 Usage: python benchmarks/throughput.py [--data DIR] [--workers 2] [--batch 8] [--steps 5] [--samples 300]
        [--config paper|smoke] [--variant V ...] [--candidate CONFIG ...] [--train-steps 200]
-       [--against TREE [--rounds 3]] [--json FILE] [--gpu-check]
+       [--against TREE [--rounds 3]] [--predict 60] [--detector DET.pt [--onnx-batch 8]
+       [--predict-data DS]] [--json FILE] [--gpu-check]
 Without --data, 48 samples at 640x480 are rendered with Mitsuba into a temporary folder first. On a CPU
 by default (config smoke); --gpu-check sizes every stage for one short run on a GPU node (paper config,
 both variants, 14 loader processes, batch 24, 200 train steps each: about 5 minutes on one H200).
@@ -71,6 +75,7 @@ from posenet.training.train import (
 )
 
 GPU_CHECK = {"workers": 14, "batch": 24, "steps": 20, "samples": 1000, "train_steps": 200}
+POSENET = [sys.executable, "-c", "from posenet.cli import main; main()"]  # the CLI, in a child process
 BLOCKS = 3  # alternating blocks per compared step: old, new, old, new, ...
 
 Step = Callable[[], torch.Tensor]
@@ -221,7 +226,7 @@ def train_rate(
     if not isinstance(config, str):
         out.with_suffix(".yaml").write_text(config.to_yaml())
         config = str(out.with_suffix(".yaml"))
-    cmd = [sys.executable, "-c", "from posenet.cli import main; main()", "train", "--data", str(data)]
+    cmd = [*POSENET, "train", "--data", str(data)]
     cmd += ["--out", str(out), "--config", config, "--max-steps", str(steps)]
     env = None
     if tree is not None:  # first on the path, and the working folder (which `python -c` puts before it)
@@ -283,7 +288,16 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--train-steps", type=int, default=200, help="posenet train's steps (0: skip the stage).")
     ap.add_argument("--skip", type=int, default=20, help="posenet train's first steps left out of its rate.")
     ap.add_argument("--predict", type=int, default=60, help="Images predict runs on (0: skip the stage).")
-    ap.add_argument("--detector", type=Path, default=None, help="A detector checkpoint for predict's stage.")
+    ap.add_argument("--detector", type=Path, default=None, help="A detector checkpoint for predict's stages.")
+    ap.add_argument(
+        "--onnx-batch",
+        type=int,
+        default=8,
+        help="Stage 6's batch: predict through ONNX with --detector (0: skip the stage) [8].",
+    )
+    ap.add_argument(
+        "--predict-data", type=Path, default=None, help="Stage 6's images: a dataset's train split [--data]."
+    )
     ap.add_argument(
         "--against",
         type=Path,
@@ -341,6 +355,8 @@ def run(args: argparse.Namespace) -> None:
                 run = Path(tmp) / "run"
                 if train_line(b, cfg, name, variant, run) and args.predict:
                     predict_line(b, cfg, run / LAST, name, variant)
+                    if args.onnx_batch and args.detector:
+                        onnx_predict_line(b, cfg, run / LAST, name, variant)
             trained.append((cfg, name, variant))
     if device.type == "cuda":  # posenet train with optim.compile (CUDA graphs), once the rest is written
         for cfg, name, variant in trained:
@@ -416,6 +432,50 @@ def predict_line(b: Bench, cfg: TrainConfig, ckpt: Path, name: str, variant: str
         stage="predict",
         variant=variant,
         **ms,
+    )
+
+
+def onnx_predict_line(b: Bench, cfg: TrainConfig, ckpt: Path, name: str, variant: str | None) -> None:
+    """Stage 6: predict as `posenet predict --onnx POSE.onnx --detector DET.onnx --batch B` runs it, on
+    --predict-data's train images: both graphs exported from stage 4's checkpoint and --detector by
+    `posenet export`, and a pose for every image (no minimum detector score)."""
+    args = b.args
+    data = args.predict_data or b.data
+    what = f"predict ({name}, {b.dev}, onnx, detector, batch {args.onnx_batch}"
+    try:
+        from harness.predict import measure  # scipy: a GPU node may lack it
+
+        from posenet.data.camera import read_camera_file
+        from posenet.predict.batch import BatchPredictor
+        from posenet.predict.predictor import Predictor
+
+        paths = [inst.rgb for inst in scan_split(data, "train", cfg.data.obj_id)][: args.predict]
+        camera = read_camera_file(data / "camera.json")
+        with tempfile.TemporaryDirectory() as tmp:
+            pose, detector = Path(tmp) / "pose.onnx", Path(tmp) / "detector.onnx"
+            cmd = [*POSENET, "export", "--ckpt", str(ckpt)]
+            cmd += ["--onnx", str(pose), "--detector", str(args.detector), "--detector-onnx", str(detector)]
+            done = subprocess.run(cmd, capture_output=True, text=True)
+            if done.returncode:
+                raise RuntimeError(f"posenet export: {done.stderr.strip().splitlines()[-1:]}")
+            predictor = Predictor.load(ckpt, detector, b.device, onnx=pose, min_score=0.0)
+            batched = BatchPredictor(predictor, args.onnx_batch, detector)
+            try:
+                row, _ = measure(predictor, paths, camera, batched)
+            finally:
+                batched.close()
+    except Exception as exc:  # onnxruntime missing, say: a line of the table, not the end of it
+        b.res.add(f"{what}): not measured ({exc!r})"[:400], stage="predict onnx", variant=variant)
+        return
+    size = "x".join(map(str, cv2.imread(str(paths[0])).shape[1::-1]))
+    stages = ", ".join(f"{k} {v:.1f}" for k, v in row["ms"].items())
+    b.res.add(
+        f"{what}, {len(paths)} images at {size}): {row['end_to_end']:.1f} images/s end to end; "
+        f"ms an image: {stages}",
+        stage="predict onnx",
+        variant=variant,
+        images=size,
+        **row,
     )
 
 
