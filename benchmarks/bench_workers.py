@@ -29,6 +29,7 @@ from pathlib import Path
 
 from harness import parser, run_script
 
+from scgen.io import usable_cores
 from scgen.render.region import FULL_FRAME_ENV
 from scgen.run.runner import RenderJob, run_render
 
@@ -72,7 +73,7 @@ def parse_args() -> argparse.Namespace:
 
 
 def run(args: argparse.Namespace) -> None:
-    cores = os.cpu_count() or 1
+    cores = usable_cores()
     runs = args.runs or [(1, 1), (cores, 1), (1, cores)]
     tmp = Path(tempfile.mkdtemp())
     names = {(w, t, m): f"{w} worker(s) x {t} thread(s), {m}" for w, t in runs for m in args.modes}

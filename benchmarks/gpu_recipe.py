@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
 import time
 from dataclasses import dataclass
@@ -43,9 +42,10 @@ from posenet.models.backbone import initial_weights
 from posenet.training.train import LAST, LOG_FILE
 from scgen.dataset.stats import sample_groups
 from scgen.io.atomic import atomic_write_text
+from scgen.io.cores import usable_cores
 from scgen.run.runner import RenderJob, run_render
 
-CORES = os.cpu_count() or 1
+CORES = usable_cores()
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,8 @@ from pathlib import Path
 
 from harness import ROOT, parser, revision_tree, run_script
 
+from scgen.io import usable_cores
+
 
 def render(
     code: Path,
@@ -39,7 +41,7 @@ def render(
     # a worker per core, as `scgen render` runs by default (and the code before the Mitsuba thread default,
     # 2150d39, ran its workers on one thread each only then)
     options = {"--n": n, "--seed": seed, "--out": out, "--backend": backend, "--resolution": resolution,
-               "--quality": "draft", "--workers": os.cpu_count() or 1}  # fmt: skip
+               "--quality": "draft", "--workers": usable_cores()}  # fmt: skip
     if camera:
         options["--camera"] = camera
     if rgb_format:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-import os
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -17,6 +16,7 @@ from scgen.dataset.export.output import IMAGE_MODES
 from scgen.dataset.layout import RGB_FORMATS
 from scgen.errors import ScgenError
 from scgen.io.camera_presets import CAMERA_PRESETS
+from scgen.io.cores import usable_cores
 from scgen.scenes.factors import FACTOR_GROUPS
 
 
@@ -140,8 +140,8 @@ def main() -> None:
     "--workers",
     type=int,
     default=None,
-    help="Worker processes/actors (default: CPU cores). Blender's workers share the cores; Mitsuba's "
-    "render on one thread each, so that its images are the same whatever the count.",
+    help="Worker processes/actors (default: the cores it may use). Blender's workers share the cores; "
+    "Mitsuba's render on one thread each, so that its images are the same whatever the count.",
 )
 @click.option(
     "--executor",
@@ -212,7 +212,7 @@ def render(
         keep_scale=keep_scale, config_path=config_path, camera=camera, resolution=res,
         overrides=overrides, split_by=split_by,
         ratios=parse_ratios(split_text), shard=parse_shard(shard_text),
-        workers=workers or os.cpu_count() or 1, executor=executor, ray_address=ray_address,
+        workers=workers or usable_cores(), executor=executor, ray_address=ray_address,
         write=WriteOptions(rgb_format=rgb_format, xyz_dtype=xyz_dtype, save_depth=save_depth),
     )  # fmt: skip
     summary = run_render(job, progress=not quiet)
@@ -227,7 +227,7 @@ def render(
 @main.command()
 @click.argument("bop_dir", type=click.Path(path_type=Path))
 @click.option("--split", default=None, help="Only this split folder (e.g. test); default: every split.")
-@click.option("--workers", type=int, default=None, help="Worker processes (default: CPU cores).")
+@click.option("--workers", type=int, default=None, help="Worker processes (default: the cores it may use).")
 @click.option("--overwrite", is_flag=True, help="Replace the dataset's own masks and scene_gt_info.json.")
 @click.option("--xyz-dtype", type=click.Choice(["float16", "float32"]), default="float16", show_default=True)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
@@ -238,7 +238,7 @@ def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: b
     from scgen.run.annotate_job import AnnotateJob, AnnotateOptions, disagreement_line, run_annotate
 
     check_output(bop_dir, folder=True, overwrite=True, what="dataset")  # labelled in place, resumed
-    job = AnnotateJob(bop_dir, split, workers or os.cpu_count() or 1, AnnotateOptions(xyz_dtype, overwrite))
+    job = AnnotateJob(bop_dir, split, workers or usable_cores(), AnnotateOptions(xyz_dtype, overwrite))
     s = run_annotate(job, progress=not quiet)
     rate = s["instances"] / s["total_s"] if s["total_s"] > 0 else 0.0
     click.echo(
@@ -251,7 +251,10 @@ def annotate(bop_dir: Path, split: str | None, workers: int | None, overwrite: b
 @main.command()
 @click.argument("dataset", type=click.Path(path_type=Path))
 @click.option(
-    "--workers", type=int, default=None, help="Processes checking scene folders (default: CPU cores)."
+    "--workers",
+    type=int,
+    default=None,
+    help="Processes checking scene folders (default: the cores it may use).",
 )
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
@@ -260,7 +263,7 @@ def validate(dataset: Path, workers: int | None, quiet: bool) -> None:
 
     if workers is not None and workers <= 0:
         raise ScgenError(f"--workers must be positive, got {workers}")
-    problems, n = validate_dataset(dataset, progress=not quiet, workers=workers or os.cpu_count() or 1)
+    problems, n = validate_dataset(dataset, progress=not quiet, workers=workers or usable_cores())
     if problems:
         for p in problems[:50]:
             click.echo(f"FAIL {p}")

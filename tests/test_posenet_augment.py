@@ -4,7 +4,6 @@ truncation, on the real rendered dataset."""
 from __future__ import annotations
 
 import dataclasses
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -20,6 +19,7 @@ from posenet.data.augment import apply_cut, draw_cut
 from posenet.data.photometric import composed, photometric, spnv2_chain
 from posenet.errors import PosenetError
 from posenet.models import ModelConfig
+from scgen.io import usable_cores
 
 MODEL = ModelConfig.create("gdrnet", "smoke")
 TARGETS = ("roi_xyz", "roi_mask_visib", "roi_mask_full", "roi_region", "site")
@@ -117,7 +117,7 @@ train(Path(sys.argv[1]), Path(sys.argv[2]), cfg, max_steps=1)
 """
 
 
-@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="one core: none left for a loader")
+@pytest.mark.skipif(usable_cores() < 2, reason="one core: none left for a loader")
 def test_opencv_used_in_the_training_process_does_not_hang_its_loader_processes(
     dataset_dir: Path, tmp_path: Path
 ) -> None:

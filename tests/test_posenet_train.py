@@ -23,6 +23,7 @@ from posenet.config import OptimConfig, load_config
 from posenet.data.layout import scan_split
 from posenet.training.budget import TimeBudget
 from posenet.training.train import cpu_threads, loader_workers, lr_factor, throughput
+from scgen.io import usable_cores
 
 TIMES = ("step_s", "wait_s")  # what a log row measures of the wall clock; the rest is arithmetic
 TINY = """\
@@ -102,13 +103,13 @@ def test_loader_processes_on_a_cpu_get_only_the_cores_the_training_threads_leave
 
 @pytest.mark.parametrize(
     ("threads", "env", "expected"),
-    [(3, "5", 3), (0, "5", 5)] + [(0, env, os.cpu_count()) for env in (None, "0", "two", "")],
+    [(3, "5", 3), (0, "5", 5)] + [(0, env, usable_cores()) for env in (None, "0", "two", "")],
 )
 def test_training_threads_are_the_config_s_else_omp_num_threads_else_one_per_core(
     threads: int, env: str | None, expected: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """optim.threads wins; at 0 a positive OMP_NUM_THREADS (a job script sharing a node) sets the count,
-    and anything else in it is ignored for one thread per core."""
+    and anything else in it is ignored for one thread per core the process may run on."""
     if env is None:
         monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
     else:

@@ -12,7 +12,6 @@ detector took 7.9 ms an image so against 12.5 ms one image at a time on both (do
 
 from __future__ import annotations
 
-import os
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -43,6 +42,7 @@ from posenet.predict.predictor import (
     pose_flags,
 )
 from posenet.predict.recrop import projected_box
+from scgen.io import usable_cores
 
 WARMUP = 3  # eager runs on a side stream before a capture (cuDNN picks its kernels; lazy buffers made)
 
@@ -124,7 +124,7 @@ class BatchPredictor:
         if size < 1:
             raise PosenetError(f"the batch size must be at least 1, got {size}")
         self.predictor, self.size, self.cuda = predictor, size, cuda
-        self.pool = ThreadPoolExecutor(threads or os.cpu_count() or 1, thread_name_prefix="predict")
+        self.pool = ThreadPoolExecutor(threads or usable_cores(), thread_name_prefix="predict")
         run_size = size if fixed else None
         autocast = torch.bfloat16 if bf16 else None
         network = predictor.network

@@ -42,7 +42,7 @@ from posenet.training.budget import PROBE_STEPS, TimeBudget, run_budget
 from posenet.training.capture import Losses, compiled_losses, eager_losses
 from posenet.training.losses import LOSS_TERMS, PmObject
 from posenet.training.ranger import Ranger
-from scgen.io import ScgenError, atomic_write_text, check_output, first_missing
+from scgen.io import ScgenError, atomic_write_text, check_output, first_missing, usable_cores
 
 LOG_FILE = "train_log.jsonl"
 LAST = "last.pt"
@@ -75,7 +75,7 @@ def cpu_threads(threads: int) -> int:
     if threads:
         return threads
     env = os.environ.get("OMP_NUM_THREADS", "").strip()
-    return int(env) if env.isdigit() and int(env) > 0 else os.cpu_count() or 1
+    return int(env) if env.isdigit() and int(env) > 0 else usable_cores()
 
 
 def pin_cpu_threads(threads: int) -> None:
@@ -121,7 +121,7 @@ def loader_workers(
         return workers
     if threads is None:
         threads = torch.get_num_threads() * int(os.environ.get("LOCAL_WORLD_SIZE", "1"))
-    return max(0, min(workers, (cores or os.cpu_count() or 1) - threads))
+    return max(0, min(workers, (cores or usable_cores()) - threads))
 
 
 def loader_processes(workers: int) -> dict[str, Any]:

@@ -3,11 +3,11 @@ reads scgen datasets through (tests/test_layering.py holds it to that).
 
 `bop` (the BOP format: file names, millimetres, the JSON entries), `atomic` (writes that are whole or
 absent), `exr` (xyz maps in OpenEXR), `image_file` (decoding images, and why one cannot be read),
-`buffers` (what a renderer hands to annotation and the writer), `camera_presets` (the `--camera`
-presets and each one's intrinsics), `sequence_frames` (which rendezvous frame each image is, from
-metadata.csv), `yaml_file` (YAML configs with YAML 1.2's floats, 1e-3 included), `output_path` (the one
-rule for an output path) and `parent_watch` (worker pools that end with their parent). The names below
-are posenet's interface.
+`buffers` (what a renderer hands to annotation and the writer), `camera_presets` (the `--camera` presets
+and each one's intrinsics), `sequence_frames` (which rendezvous frame each image is, from metadata.csv),
+`cores` (the cores a process may run on: default workers and threads), `yaml_file` (YAML configs with YAML
+1.2's floats, 1e-3 included), `output_path` (the one rule for an output path) and `parent_watch` (worker
+pools that end with their parent). The names below are posenet's interface.
 """
 
 from scgen.errors import ScgenError
@@ -15,6 +15,7 @@ from scgen.io import bop
 from scgen.io.atomic import atomic_write_bytes, atomic_write_text
 from scgen.io.bop import NOT_A_FOLDER, not_a_dataset
 from scgen.io.camera_presets import preset_intrinsics
+from scgen.io.cores import usable_cores
 from scgen.io.exr import read_xyz_exr
 from scgen.io.image_file import read_image, why_unreadable
 from scgen.io.output_path import (
@@ -46,6 +47,7 @@ __all__ = [
     "read_image",
     "read_sequence_frames",
     "read_xyz_exr",
+    "usable_cores",
     "why_unreadable",
     "write_output",
 ]

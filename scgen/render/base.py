@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import importlib.util
-import os
 from typing import Protocol
 
 from scgen.errors import ScgenError
 from scgen.io.buffers import Buffers
+from scgen.io.cores import usable_cores
 from scgen.render.conventions import MITSUBA_THREADS
 from scgen.scenes.model import TargetModel
 from scgen.scenes.spec import SceneSpec
@@ -77,4 +77,4 @@ def renderer_threads(name: str, workers: int, threads: int | None = None) -> int
     of the cores (Cycles' pixels do not depend on its thread count) and Mitsuba's MITSUBA_THREADS."""
     if threads:
         return threads
-    return MITSUBA_THREADS if name == "mitsuba" else max(1, (os.cpu_count() or 1) // workers)
+    return MITSUBA_THREADS if name == "mitsuba" else max(1, usable_cores() // workers)

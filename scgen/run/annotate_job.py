@@ -15,7 +15,6 @@ The dataset's own masks and scene_gt_info values are kept (only `xyz_box` is add
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from collections import defaultdict
@@ -36,6 +35,7 @@ from scgen.errors import ScgenError
 from scgen.io import bop
 from scgen.io.atomic import atomic_write_bytes, atomic_write_text, remove_stale_temporaries
 from scgen.io.bop import read_json
+from scgen.io.cores import usable_cores
 from scgen.io.exr import encode_xyz_exr
 from scgen.io.parent_watch import spawn_pool
 from scgen.render.mitsuba import raycast
@@ -201,7 +201,7 @@ def run_annotate(job: AnnotateJob, progress: bool = True) -> dict[str, Any]:
     if job.workers <= 0:
         raise ScgenError(f"--workers must be positive, got {job.workers}")
     data = open_bop_dataset(job.root, job.split)
-    threads = max(1, (os.cpu_count() or 1) // job.workers)
+    threads = max(1, usable_cores() // job.workers)
     # workers get the dataset without its image list: each task carries its own image
     context = _Context(replace(data, images=()), read_models(data), job.options, threads)
     for split in sorted({im.split for im in data.images}):
