@@ -566,6 +566,7 @@ def test_the_batched_path_gives_the_one_at_a_time_poses(
     bound = _pose_rounding(pose_ckpt, rot6d, *_detector_rounding(detector_ckpt, seen, 640 / 320))
     for fixed in (False, True):
         batched = BatchPredictor(predictor, 3, detector_ckpt, fixed=fixed)
+        assert batched.boxes.model is predictor.detector.model  # the checkpoint read once, for both paths
         for i, (a, b) in enumerate(zip(one, batched(images, big, boxes), strict=True)):
             _same_pose(a, b, f"image {i}, fixed {fixed}", bound)
         batched.close()

@@ -36,6 +36,7 @@ from posenet.predict.predictor import (
     Box,
     Pose,
     Predictor,
+    TorchBestBox,
     detect_box,
     detector_box,
     load_box_detector,
@@ -138,7 +139,11 @@ class BatchPredictor:
         elif detector is not None:
             from posenet.detection.detect import BatchBestBox, load_detector  # torchvision: when asked for
 
-            model, _ = load_detector(detector, predictor.device)
+            known = predictor.detector
+            if isinstance(known, TorchBestBox) and known.path == Path(detector):
+                model = known.model  # the predictor's own network: the checkpoint is not read twice
+            else:
+                model, _ = load_detector(detector, predictor.device)
             if cuda:
                 model.to(memory_format=torch.channels_last)
             self.boxes = BatchBestBox(model)

@@ -287,17 +287,25 @@ def load_box_detector(
         return lambda rgb: run_detector_onnx(session, rgb)
     from posenet.detection.detect import load_detector  # torchvision's FCOS: only when asked for
 
-    model, _ = load_detector(path, device)
+    return TorchBestBox(Path(path), load_detector(path, device)[0], device)
+
+
+@dataclass(frozen=True)
+class TorchBestBox:
+    """A detector checkpoint's best box in an image, in torch; its network (`model`, read from `path`) is
+    also what predict --batch runs on whole batches (posenet.predict.batch), so the file is read once."""
+
+    path: Path
+    model: torch.nn.Module
+    device: torch.device
 
     @torch.inference_mode()
-    def best_box(rgb: np.ndarray) -> tuple[np.ndarray, float] | None:
-        pred = model([image_tensor(rgb).to(device)])[0]
+    def __call__(self, rgb: np.ndarray) -> tuple[np.ndarray, float] | None:
+        pred = self.model([image_tensor(rgb).to(self.device)])[0]
         if len(pred["scores"]) == 0:
             return None
         best = int(pred["scores"].argmax())
         return pred["boxes"][best].cpu().double().numpy(), float(pred["scores"][best])
-
-    return best_box
 
 
 def _session(path: Path, open_session: Callable[[Path], Any]) -> Any:
