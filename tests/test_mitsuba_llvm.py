@@ -22,11 +22,13 @@ from scgen.render.mitsuba.llvm import (
     LIBLLVM_ENV,
     LIBLLVM_GLOBS,
     VERDICT_ENV,
+    VERDICTS_KEPT,
     Libllvm,
     libllvm_major,
     machine_key,
     newer_libllvms,
     probe_libllvm,
+    remember_verdict,
     verdict_file,
 )
 from scgen.run.runner import RenderJob, run_render
@@ -149,3 +151,14 @@ def test_a_failed_probe_leaves_no_verdict(tmp_path: Path, monkeypatch: pytest.Mo
     fake.write_bytes(b"not a shared library")
     assert probe_libllvm(str(fake)).error is not None
     assert not verdict_file().exists()
+
+
+def test_the_verdict_file_keeps_its_newest_entries(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path))
+    verdict = Libllvm("/usr/lib/libLLVM.so.19", "19.1.7", None)
+    for k in range(VERDICTS_KEPT + 4):
+        remember_verdict(f"key{k}", verdict)
+    remember_verdict("key2", verdict)  # an old key written again is the newest
+    keys = list(json.loads(verdict_file().read_text()))
+    assert len(keys) == VERDICTS_KEPT and keys[-1] == "key2"
+    assert keys[:-1] == [f"key{k}" for k in range(5, VERDICTS_KEPT + 4)]

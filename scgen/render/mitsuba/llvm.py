@@ -31,6 +31,7 @@ from scgen.render.probe import probe
 LIBLLVM_ENV = "DRJIT_LIBLLVM_PATH"  # Dr.Jit's own setting
 VERDICT_ENV = "SCGEN_MITSUBA_VARIANT"  # the verdict, for the processes this one starts
 RENDER_CODE = Path(__file__).resolve().parents[1]  # scgen/render: what the probe sample runs
+VERDICTS_KEPT = 16  # the newest verdicts the file holds (one per libLLVM asked for and version of the code)
 CACHE_ENV = "SCGEN_CACHE_DIR"  # where scgen keeps what it learnt of this machine [XDG_CACHE_HOME/scgen]
 LLVM_VARIANT, SCALAR_VARIANT = "llvm_ad_rgb", "scalar_rgb"
 # where Debian/Ubuntu (also the llvm-N trees), Fedora/RHEL and local builds install libLLVM
@@ -162,17 +163,20 @@ def read_verdicts() -> dict[str, dict]:
     """The verdict file's entries ({} where it is missing or unreadable: then each libLLVM is probed)."""
     try:
         return json.loads(verdict_file().read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RuntimeError):  # RuntimeError: Path.home() with no home to find
         return {}
 
 
 def remember_verdict(key: str, found: Libllvm) -> None:
-    """Add `found` to the verdict file; where it cannot be written (a read-only home) nothing is kept."""
-    path = verdict_file()
+    """Add `found` to the verdict file (its newest VERDICTS_KEPT entries stay); where it cannot be written
+    (a read-only home) nothing is kept."""
     try:
+        path = verdict_file()
         path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(path, json.dumps({**read_verdicts(), key: asdict(found)}, indent=1) + "\n")
-    except OSError:
+        kept = {k: v for k, v in read_verdicts().items() if k != key} | {key: asdict(found)}
+        newest = dict(list(kept.items())[-VERDICTS_KEPT:])  # the file does not grow with every upgrade
+        atomic_write_text(path, json.dumps(newest, indent=1) + "\n")
+    except (OSError, RuntimeError):
         pass
 
 
