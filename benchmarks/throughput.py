@@ -467,7 +467,7 @@ def onnx_predict_line(b: Bench, cfg: TrainConfig, ckpt: Path, name: str, variant
     except Exception as exc:  # onnxruntime missing, say: a line of the table, not the end of it
         b.res.add(f"{what}): not measured ({exc!r})"[:400], stage="predict onnx", variant=variant)
         return
-    size = "x".join(map(str, cv2.imread(str(paths[0])).shape[1::-1]))
+    size = "x".join(map(str, camera.size))  # the dataset's images: its camera's
     stages = ", ".join(f"{k} {v:.1f}" for k, v in row["ms"].items())
     b.res.add(
         f"{what}, {len(paths)} images at {size}): {row['end_to_end']:.1f} images/s end to end; "

@@ -9,7 +9,8 @@ DRJIT_LIBLLVM_PATH; otherwise Mitsuba renders with scalar_rgb, after one line sa
 the fast path. The verdict is kept in the environment: worker processes started later take it over
 instead of probing again. A libLLVM that rendered is also kept on disk (verdict_file, ~3 s saved per
 run): the next process trusts it while nothing it depended on has changed (the versions of Dr.Jit and
-Mitsuba, the libLLVM asked for, every libLLVM file on the machine, the loader's search path).
+Mitsuba, the libLLVM asked for, every libLLVM file on the machine, the loader's search path, scgen's
+render code: machine_key).
 """
 
 from __future__ import annotations
@@ -116,9 +117,9 @@ def probe_libllvm(path: str | None, fresh: bool = False) -> Libllvm:
     if path is not None and not os.path.exists(path):
         return Libllvm(path, None, "no such file")
     key = machine_key(path)
-    verdicts = read_verdicts()
-    if not fresh and key in verdicts and os.path.exists(verdicts[key]["path"] or "/"):
-        return Libllvm(**verdicts[key])
+    kept = {} if fresh else read_verdicts().get(key)
+    if kept and os.path.exists(kept["path"] or "/"):
+        return Libllvm(**kept)
     env = {k: v for k, v in os.environ.items() if k not in (LIBLLVM_ENV, VERDICT_ENV)}
     if path is not None:
         env[LIBLLVM_ENV] = path
