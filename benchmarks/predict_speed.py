@@ -2,7 +2,8 @@
 
     python benchmarks/predict_speed.py --pose POSE.pt --detector DET.pt --images DIR \\
         [--camera DIR/camera.json] [--device cpu|cuda] [--n 64] [--batch 16] [--threads T] \\
-        [--onnx POSE.onnx --detector-onnx DET.onnx] [--preset paper [--variant gdrnet]] [--json OUT.json]
+        [--onnx POSE.onnx --detector-onnx DET.onnx] [--preset paper [--variant gdrnet]] [--passes 2] \\
+        [--json OUT.json]
     python benchmarks/predict_speed.py --pose POSE.pt --detector DET.pt --images DIR --make-kit KIT
 
 The first --n images of DIR (sorted) go through predict with the detector, as `posenet predict` runs them,
@@ -49,6 +50,7 @@ from posenet.errors import PosenetError
 from posenet.models import create_model
 from posenet.predict.batch import BatchPredictor
 from posenet.predict.predictor import Predictor
+from posenet.predict.recrop import PREDICT_PASSES
 
 KEEP = ("model", "model_config", "config", "step", "object", "camera")  # what predict and export read
 
@@ -153,7 +155,7 @@ def run(args: argparse.Namespace) -> None:
             modes += [("onnx one", args.onnx, det, {}), ("onnx batch", args.onnx, det, {})]
         refs: dict[bool, list[Any]] = {}  # the one-at-a-time poses, torch's and onnxruntime's
         for name, onnx, det, options in modes:
-            predictor = Predictor.load(pose, det, device, onnx=onnx, min_score=0.0)
+            predictor = Predictor.load(pose, det, device, onnx=onnx, min_score=0.0, passes=args.passes)
             batched = None
             if "batch" in name:
                 batched = BatchPredictor(predictor, args.batch, det, threads=args.threads or None, **options)
@@ -188,6 +190,8 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--device", default="cpu", help="cpu or cuda [cpu].")
     ap.add_argument("--n", type=positive, default=64, help="Images measured [64].")
     ap.add_argument("--batch", type=positive, default=16, help="The batched modes' batch size [16].")
+    runs = f"Pose network runs per image (re-crops) [{PREDICT_PASSES}, posenet predict's]."
+    ap.add_argument("--passes", type=positive, default=PREDICT_PASSES, help=runs)
     ap.add_argument("--threads", type=int, default=0, help="torch and pool threads [0: the defaults].")
     ap.add_argument("--onnx", type=Path, default=None, help="The pose network's ONNX graph: the onnx modes.")
     ap.add_argument("--detector-onnx", type=Path, default=None, help="The detector's, for the onnx modes.")

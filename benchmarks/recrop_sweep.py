@@ -2,9 +2,11 @@
 at perturbed ones, each set against the true boxes' first pass over the same images.
 
     python benchmarks/recrop_sweep.py --pose RUN/last.pt --data HELD_OUT --out /tmp/sweep \
-        [--split train --split val --split test] [--noise 0.05 --noise 0.1 --noise 0.2] [--passes 3]
+        [--split train --split val --split test] [--noise 0.05 --noise 0.1 --noise 0.2] [--passes 3] \
+        [--detector DET/best.pt ...]
 
-For each box source (the ground truth, then `posenet boxes --noise N` of each --noise) and each pass
+For each box source (the ground truth, `posenet boxes --noise N` of each --noise, then `posenet boxes
+--detector DET` of each --detector) and each pass
 count up to --passes, `posenet.evaluate` scores every instance of the splits; an instance passes when its
 ADD (ADD-S for a symmetric object, as posenet eval's add_0.1d) is under a tenth of the object's
 diameter. A row's difference to the true boxes' first pass is the mean of the per-image differences
@@ -21,8 +23,10 @@ and the images right only in that row / only at the true boxes.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
+import re
 import statistics
 import subprocess
 import sys
@@ -44,27 +48,46 @@ def parse() -> argparse.Namespace:
     ap.add_argument("--split", action="append", help="Splits scored together [train, val, test].")
     ap.add_argument("--noise", type=float, action="append", help="Box noise levels [0.05, 0.1, 0.2].")
     ap.add_argument("--passes", type=int, default=3, help="Most re-crop passes [3].")
+    ap.add_argument("--detector", type=Path, action="append", default=[], help="Detector checkpoint: a row.")
     ap.add_argument("--out", type=Path, required=True, help="Working folder: boxes, results.json.")
     return ap.parse_args()
 
 
-def noisy_boxes(data: Path, split: str, noise: float, out: Path) -> Path:
-    """`posenet boxes --noise` for one split, written once."""
-    path = out / f"boxes_noise{noise:g}_{split}.json"
+@dataclasses.dataclass(frozen=True)
+class BoxSource:
+    """A table row's boxes: `key` names it in results.json, `option` is `posenet boxes`' (none: the
+    ground truth, which eval reads itself)."""
+
+    name: str
+    key: str
+    option: tuple[str, ...] = ()
+
+
+def box_sources(args: argparse.Namespace) -> list[BoxSource]:
+    """The ground truth, each --noise level, each --detector (keys of earlier runs kept: a re-run resumes)."""
+    noisy = [BoxSource(f"noise {n:g}", f"{n:g}", ("--noise", str(n))) for n in args.noise or [0.05, 0.1, 0.2]]
+    detected = [BoxSource(f"detector {d}", f"detector:{d}", ("--detector", str(d))) for d in args.detector]
+    return [BoxSource("ground truth", "0"), *noisy, *detected]
+
+
+def boxes_file(data: Path, split: str, source: BoxSource, out: Path) -> Path:
+    """`posenet boxes` of `source` for one split, written once."""
+    slug = re.sub(r"[^\w.-]+", "_", source.key)
+    path = out / f"boxes_{slug}_{split}.json"
     if not path.exists():
         out.mkdir(parents=True, exist_ok=True)
         cmd = [str(POSENET), "boxes", "--data", str(data), "--split", split, "--out", str(path)]
-        done = subprocess.run([*cmd, "--noise", str(noise)], capture_output=True, text=True)
+        done = subprocess.run([*cmd, *source.option], capture_output=True, text=True)
         if done.returncode:  # posenet's own one-line error, passed on
             raise PosenetError(done.stderr.strip().splitlines()[-1].removeprefix("Error: "))
     return path
 
 
-def score(args: argparse.Namespace, splits: list[str], noise: float, passes: int) -> dict:
+def score(args: argparse.Namespace, splits: list[str], source: BoxSource, passes: int) -> dict:
     """Per-image ADD@0.1d outcomes and the instance-weighted mean crop IoU of each pass."""
     outcomes, iou_sums, n = {}, [0.0] * passes, 0
     for split in splits:
-        boxes = noisy_boxes(args.data, split, noise, args.out) if noise > 0 else None
+        boxes = boxes_file(args.data, split, source, args.out) if source.option else None
         result = evaluate(args.data, args.pose, split, boxes=boxes, workers=2, passes=passes)
         add_key = headline_add(result.summary["symmetric"])[0]  # as posenet eval's add_0.1d: inf on a miss
         for record in result.records:
@@ -86,29 +109,28 @@ def paired_difference(row: dict[str, bool], base: dict[str, bool]) -> tuple[floa
 
 def run(args: argparse.Namespace) -> None:
     splits = args.split or ["train", "val", "test"]
-    levels = [0.0, *(args.noise or [0.05, 0.1, 0.2])]
+    sources = box_sources(args)
     path = args.out / "results.json"
     results = json.loads(path.read_text()) if path.exists() else {}
-    for noise in levels:
+    for source in sources:
         for passes in range(1, args.passes + 1):
-            key = f"{noise:g}/{passes}"
+            key = f"{source.key}/{passes}"
             if key not in results:
-                results[key] = score(args, splits, noise, passes)
+                results[key] = score(args, splits, source, passes)
                 args.out.mkdir(parents=True, exist_ok=True)  # made once a row is scored: no empty OUT
                 path.write_text(json.dumps(results))
-    base = results[f"{0:g}/1"]["outcomes"]
+    base = results["0/1"]["outcomes"]
     print(f"{len(base)} instances of {', '.join(splits)} in {args.data}; the base is the true boxes' pass 1")
     print("| boxes | passes | crop IoU per pass | ADD@0.1d | vs true, pass 1 | only here / only there |")
     print("|---|---|---|---|---|---|")
-    for noise in levels:
+    for source in sources:
         for passes in range(1, args.passes + 1):
-            row = results[f"{noise:g}/{passes}"]
+            row = results[f"{source.key}/{passes}"]
             mean, se, gained, lost = paired_difference(row["outcomes"], base)
             add = sum(row["outcomes"].values()) / len(row["outcomes"])
             ious = " / ".join(f"{v:.2f}" for v in row["box_iou"])
-            name = "ground truth" if noise == 0 else f"noise {noise:g}"
-            print(f"| {name} | {passes} | {ious} | {100 * add:.1f} % | {100 * mean:+.1f} ± {100 * se:.1f} "
-                  f"| {gained} / {lost} |")  # fmt: skip
+            print(f"| {source.name} | {passes} | {ious} | {100 * add:.1f} % "
+                  f"| {100 * mean:+.1f} ± {100 * se:.1f} | {gained} / {lost} |")  # fmt: skip
 
 
 if __name__ == "__main__":

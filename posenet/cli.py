@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import click
 import cv2
@@ -38,6 +40,7 @@ from posenet.models import VARIANTS
 from posenet.predict.batch import BatchPredictor
 from posenet.predict.inputs import predict_inputs
 from posenet.predict.ransac import PNP_LABELS, PNP_METHODS
+from posenet.predict.recrop import PREDICT_PASSES
 from posenet.predict.run import FORMATS as PREDICT_FORMATS
 from posenet.predict.run import run_predict
 from posenet.training.train import train as run_train
@@ -55,15 +58,16 @@ minutes_option = click.option(
 )
 
 
-# posenet eval's and predict's: both re-crop through posenet.predict.recrop
-passes_option = click.option(
-    "--passes",
-    type=click.IntRange(min=1),
-    default=1,
-    show_default=True,
-    help="Pose network runs per image: 1 on the box, then each re-cropped around the model's box at the "
-    "pose before (posenet.predict.recrop); eval gives the box IoU with the true box per pass.",
-)
+def passes_option(default: int, why: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """posenet eval's and predict's --passes: both re-crop through posenet.predict.recrop."""
+    return click.option(
+        "--passes",
+        type=click.IntRange(min=1),
+        default=default,
+        show_default=True,
+        help="Pose network runs per image: 1 on the box, then each re-cropped around the model's box at the "
+        f"pose before (posenet.predict.recrop); {why}",
+    )
 
 
 @click.group(cls=OneLineErrorGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -166,7 +170,7 @@ def train(
     show_default=True,
     help="Pose solver: the network's Patch-PnP, OpenCV's PnP-RANSAC on its predicted xyz and mask, or both.",
 )
-@passes_option
+@passes_option(1, "eval gives the box IoU with the true box per pass; 1 is the paper's protocol.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json, --predictions or --bop-csv.")
 def eval_cmd(
     data: Path,
@@ -511,7 +515,7 @@ def viz(
     show_default=True,
     help="The detector's score floor: a best box scoring less is no detection (flag no_detection).",
 )
-@passes_option
+@passes_option(PREDICT_PASSES, "the default was chosen on held-out images (docs/benchmarks.md).")
 @click.option(
     "--track",
     is_flag=True,

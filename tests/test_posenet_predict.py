@@ -28,6 +28,7 @@ from posenet.evaluation.evaluate import evaluate
 from posenet.predict import Pose, Predictor, make_camera
 from posenet.predict.batch import BatchPredictor
 from posenet.predict.overlay import LABEL_MARGIN, draw_label, label_style
+from posenet.predict.recrop import PREDICT_PASSES
 from scgen.generator import Generator
 from scgen.io import bop
 from scgen.run.runner import RenderJob, run_render
@@ -73,12 +74,13 @@ def test_a_split_gives_eval_poses_and_the_field_files(dataset_dir: Path, pose_ck
     _invoke("predict", "--data", dataset_dir, "--split", "test", "--ckpt", pose_ckpt, "--out", out,
             "--format", "bop", "--format", "speedplus")  # fmt: skip
     records = {(r["scene_id"], r["im_id"]): r for r in _lines(out / "predictions.jsonl")}
-    result = evaluate(dataset_dir, pose_ckpt, "test", workers=0, batch_size=1)
+    result = evaluate(dataset_dir, pose_ckpt, "test", workers=0, batch_size=1, passes=PREDICT_PASSES)
     assert len(records) == len(result.records) > 0
     for r in result.records:
         mine = records[r["scene_id"], r["im_id"]]
-        # the same crop, batch size (1) and decoding: the same float32 arithmetic, so the same floats (how
-        # another batch size moves them is test_posenet_eval's batched test)
+        # the same crops (the box, then predict's default re-crops: eval's are the same code), batch size
+        # (1) and decoding: the same float32 arithmetic, so the same floats (how another batch size moves
+        # them is test_posenet_eval's batched test)
         np.testing.assert_array_equal(mine["R"], r["R"])
         np.testing.assert_array_equal(mine["t"], r["t"])
         R = np.array(mine["R"]).reshape(3, 3)
@@ -318,6 +320,7 @@ def test_onnx_gives_torch_poses(user_folder: Path, pose_ckpt: Path, detector_ckp
             "--detector-onnx", det_onnx)  # fmt: skip
     common = [user_folder, "--ckpt", pose_ckpt, "--camera", user_folder / "camera.json", "--no-vis"]
     common += ["--min-score", 0]  # every box: the 1-step detector's scores are not the point here
+    common += ["--passes", 1]  # rounding at one crop (re-crops: the batched path's test, _same_pose)
     _invoke("predict", *common, "--detector", detector_ckpt, "--out", tmp_path / "torch")
     _invoke("predict", *common, "--detector", det_onnx, "--onnx", pose_onnx, "--out", tmp_path / "onnx")
     torch_lines, onnx_lines = (_lines(tmp_path / d / "predictions.jsonl") for d in ("torch", "onnx"))
@@ -342,12 +345,12 @@ def test_onnx_gives_torch_poses(user_folder: Path, pose_ckpt: Path, detector_ckp
     # the batched path runs the one-image detector graph on a batch's images side by side, one
     # onnxruntime thread each: predict's one-at-a-time poses (its own sessions sum in another order)
     camera = read_camera_file(user_folder / "camera.json")
-    on_torch = Predictor.load(pose_ckpt, detector_ckpt, min_score=0.0)
+    on_torch = Predictor.load(pose_ckpt, detector_ckpt, min_score=0.0, passes=1)
     with rotation_outputs() as rot6d:
         for frame in frames:
             on_torch(frame, camera)
     bound = _pose_rounding(pose_ckpt, rot6d, score, edge)
-    on_onnx = Predictor.load(pose_ckpt, det_onnx, onnx=pose_onnx, min_score=0.0)
+    on_onnx = Predictor.load(pose_ckpt, det_onnx, onnx=pose_onnx, min_score=0.0, passes=1)
     one = [on_onnx(frame, camera) for frame in frames]
     batched = BatchPredictor(on_onnx, 3, det_onnx)
     for i, (a, b) in enumerate(zip(one, batched(frames, camera), strict=True)):
@@ -558,7 +561,7 @@ def test_the_batched_path_gives_the_one_at_a_time_poses(
     big = resized(camera, (640, 480))
     images = [cv2.resize(cv2.imread(str(p)), (640, 480)) for p in sorted(user_folder.glob("frame*"))]
     assert len(images) % 3 != 0  # the last batch is short: the padding is exercised
-    predictor = Predictor.load(pose_ckpt, detector_ckpt, min_score=0.0)
+    predictor = Predictor.load(pose_ckpt, detector_ckpt, min_score=0.0, passes=1)
     boxes = [None if i % 2 else (200.0, 150.0, 240.0, 180.0) for i in range(len(images))]
     with rotation_outputs() as rot6d:
         one = [predictor(image, big, box) for image, box in zip(images, boxes, strict=True)]
@@ -596,6 +599,7 @@ def test_predict_batch_writes_the_one_at_a_time_records(
     on a CPU are one-line refusals."""
     common = [user_folder, "--ckpt", pose_ckpt, "--detector", detector_ckpt, "--camera", "training",
               "--min-score", 0, "--no-vis"]  # fmt: skip
+    common += ["--passes", 1]  # rounding at one crop (re-crops: the batched path's test, _same_pose)
     with rotation_outputs() as rot6d:
         _invoke("predict", *common, "--out", tmp_path / "one")
     _invoke("predict", *common, "--batch", 3, "--out", tmp_path / "three")

@@ -92,9 +92,10 @@ def test_the_detector_learns_the_clipped_full_object_box(dataset_dir: Path):
 
 
 def test_each_pass_crops_around_the_pose_before(dataset_dir: Path, pose_ckpt: Path):
-    """Predictor(passes=2): the second crop is projected_box of the first pass's pose; passes=1 is today's
-    single pass, whose pose the two-pass run starts from."""
-    one, two = Predictor.load(pose_ckpt), Predictor.load(pose_ckpt, passes=2)
+    """Predictor(passes=2), the default: the second crop is projected_box of the first pass's pose;
+    passes=1 is the single pass, whose pose the two-pass run starts from."""
+    one, two = Predictor.load(pose_ckpt, passes=1), Predictor.load(pose_ckpt)
+    assert two.passes == 2
     for frame in dataset_frames(dataset_dir, "test", 1)[:3]:
         frame = load_frame(frame)
         first = one(frame.image, frame.camera, frame.box)
@@ -139,7 +140,8 @@ def test_a_tracked_sequence_keeps_its_target(sequence_dataset: Path, sequence_ck
     target: the true centre's projection lies inside the crop (the DZI square) and the seed box meets
     the true one. The poses are the truth's (the tiny network has learned nothing); the tracker runs the
     real network on the seed box, with no detector run."""
-    predictor = Predictor.load(sequence_ckpt)
+    # one pass: the seed box is under test; the untrained network's re-crop would land anywhere
+    predictor = Predictor.load(sequence_ckpt, passes=1)
     tracker = Tracker(predictor, min_confidence=0.0)
     frames = {f.key: f for f in dataset_frames(sequence_dataset, "test", 1)}
     truth = {i.key: i for i in _instances(sequence_dataset)}

@@ -14,6 +14,7 @@ from posenet.data.boxes import read_boxes, read_misses
 from posenet.data.camera import Camera, make_camera, parse_inline, read_camera_file
 from posenet.errors import PosenetError
 from posenet.predict.predictor import Box, Predictor
+from posenet.predict.recrop import PREDICT_PASSES
 from posenet.predict.run import MISS
 from posenet.predict.sources import Frame, dataset_frames, read_frames, resolve_source
 from posenet.predict.track import Tracker
@@ -77,7 +78,7 @@ def predict_inputs(
     presets: PresetLookup,
     onnx: Path | None = None,
     min_score: float | None = None,
-    passes: int = 1,
+    passes: int = PREDICT_PASSES,
     track: bool = False,
 ) -> PredictInputs:
     """The checked inputs of one predict run (nothing is written here). A sequence dataset's frames come

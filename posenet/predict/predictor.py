@@ -39,7 +39,7 @@ from posenet.errors import PosenetError
 from posenet.geometry import decode_pose, mask_probability
 from posenet.predict.pixels import to_bgr8
 from posenet.predict.ransac import MIN_POINTS, correspondences
-from posenet.predict.recrop import projected_box
+from posenet.predict.recrop import PREDICT_PASSES, projected_box
 
 LOW_CONFIDENCE = 0.5  # below: the pose is flagged low_confidence
 FLAGS = ("no_detection", "behind_camera", "outside_view", "low_confidence")
@@ -130,7 +130,7 @@ class Predictor:
         detector: Detector | None = None,
         device: torch.device | None = None,
         min_score: float = 0.0,
-        passes: int = 1,
+        passes: int = PREDICT_PASSES,
     ) -> None:
         cfg = config_from_dict(state["config"])
         self.network, self.obj, self.camera, self.detector = network, obj, camera, detector
@@ -152,7 +152,7 @@ class Predictor:
         data: Path | None = None,
         onnx: Path | None = None,
         min_score: float | None = None,
-        passes: int = 1,
+        passes: int = PREDICT_PASSES,
     ) -> Predictor:
         """The pose checkpoint `ckpt` and a detector (its checkpoint, or its ONNX graph from `posenet
         export`: a `.onnx` file runs in onnxruntime) on `device`; `onnx`, the pose network's exported
@@ -160,7 +160,8 @@ class Predictor:
         checkpoint written before predict existed has no object or camera: `data`, the dataset it was
         trained on, supplies them. A detection scoring under `min_score` (None: the detector's floor,
         posenet.detection.detect.MIN_SCORE) is no detection. `passes`: the network's runs per image, each
-        after the first re-cropped around the model's box at the pose before (posenet.predict.recrop)."""
+        after the first re-cropped around the model's box at the pose before (posenet.predict.recrop; the
+        default, PREDICT_PASSES, measured there)."""
         from posenet.detection.detect import MIN_SCORE  # torchvision's FCOS: only when asked for
 
         dev = torch.device(device)
