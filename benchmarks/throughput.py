@@ -264,7 +264,7 @@ def predict_stages(
     wall = time.perf_counter() - tic
     return {
         "decode": float(np.mean(decode)),
-        **predictor.timings.mean_ms(),
+        **predictor.timings.per_image_ms(len(insts) - 1),
         "images_s": (len(insts) - 1) / wall,
     }
 

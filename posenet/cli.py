@@ -585,7 +585,7 @@ def predict(
                f"{len(run.records) / max(run.seconds, 1e-9):.1f} images/s")  # fmt: skip
     if inputs.tracker is not None:
         click.echo(f"tracking: the detector ran on {inputs.tracker.detections} of {len(run.records)} inputs")
-    stages = inputs.predictor.timings.mean_ms()
+    stages = inputs.predictor.timings.per_image_ms(len(run.records))
     click.echo("latency per image (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
     for path in run.files:
         click.echo(f"wrote {path}")

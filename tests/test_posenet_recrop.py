@@ -23,7 +23,7 @@ from posenet.data.layout import scan_split
 from posenet.data.object_model import load_object_model
 from posenet.detection.detector import target_boxes
 from posenet.evaluation.evaluate import evaluate
-from posenet.predict.predictor import Pose, Predictor
+from posenet.predict.predictor import Pose, Predictor, Timings
 from posenet.predict.recrop import box_iou, in_view, projected_box
 from posenet.predict.sources import dataset_frames, load_frame
 from posenet.predict.track import DETECTOR, TRACK, Tracker
@@ -133,6 +133,22 @@ def test_eval_passes_recrop_and_report_the_box_iou(dataset_dir: Path, pose_ckpt:
 @pytest.fixture(scope="module")
 def sequence_ckpt(sequence_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tiny_pose_checkpoint(sequence_dataset, tmp_path_factory)
+
+
+def test_the_latency_of_a_stage_run_twice_an_image_is_both_runs(dataset_dir: Path, pose_ckpt: Path):
+    """With two passes the pose network runs twice an image, and the crop three times (the warp, then
+    each pass's crop): predict's per-image latency is each stage's total over the images."""
+    predictor = Predictor.load(pose_ckpt, passes=2)
+    frames = [load_frame(f) for f in dataset_frames(dataset_dir, "test", 1)[:2]]
+    passes = sum(len(predictor(frame.image, frame.camera, frame.box).crops) for frame in frames)
+    assert passes > len(frames)  # a re-crop ran (a pose projecting nowhere keeps its first pass)
+    runs = {stage: len(ms) for stage, ms in predictor.timings.ms.items()}
+    assert runs["pose_network"] == passes and runs["crop"] == len(frames) + passes
+    per_image = predictor.timings.per_image_ms(len(frames))
+    for stage, ms in predictor.timings.ms.items():
+        assert per_image[stage] == pytest.approx(sum(ms) / len(frames), rel=1e-12)
+    empty = Timings()
+    assert empty.per_image_ms(0) == {}
 
 
 def test_a_tracked_sequence_keeps_its_target(sequence_dataset: Path, sequence_ckpt: Path):

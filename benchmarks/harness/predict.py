@@ -59,7 +59,7 @@ def measure(
         list(batched.pool.map(lambda p: cv2.imread(str(p)), paths))
         seconds = time.perf_counter() - t0
         predictor.timings.ms["decode"] = [1000.0 * seconds / len(paths)] * len(paths)
-    ms = predictor.timings.mean_ms()
+    ms = predictor.timings.per_image_ms(len(paths))
     rates = {s: round(1000.0 / ms[s], 1) for s in SHOWN if ms.get(s)}
     return {"ms": {s: round(v, 3) for s, v in ms.items()}, "images_per_s": rates,
             "end_to_end": round(len(paths) / wall, 1)}, poses  # fmt: skip

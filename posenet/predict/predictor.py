@@ -91,15 +91,18 @@ NO_DETECTION = Pose(None, None, None, 0.0, 0.0, ("no_detection",))
 
 @dataclass
 class Timings:
-    """Milliseconds per stage over the images (STAGES), for predict's latency line."""
+    """Milliseconds spent per stage (STAGES), for predict's latency line: a stage may run more than once
+    for an image (the warp and each pass's crop, each pass's network), so a figure per image is the
+    stage's total over the images, not the mean of its runs."""
 
     ms: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
 
     def add(self, stage: str, seconds: float) -> None:
         self.ms[stage].append(seconds * 1000.0)
 
-    def mean_ms(self) -> dict[str, float]:
-        return {s: float(np.mean(self.ms[s])) for s in STAGES if self.ms.get(s)}
+    def per_image_ms(self, images: int) -> dict[str, float]:
+        """Each stage's milliseconds per image over `images` images."""
+        return {s: float(np.sum(self.ms[s])) / max(images, 1) for s in STAGES if self.ms.get(s)}
 
 
 class _Clock:
