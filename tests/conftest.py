@@ -2,22 +2,26 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import pytest
 from shared_dirs import shared_dir
 
-from scgen.render.mitsuba.llvm import CACHE_ENV
+from scgen.io.machine_cache import CACHE_ENV
 from scgen.run.runner import RenderJob, run_render
 from scgen.scenes.model import TargetModel, load_target
 
 SMALL = (320, 240)
 # albumentations asks PyPI for a newer version on import (2 s timeout): tests stay off the network
 os.environ.setdefault("NO_ALBUMENTATIONS_UPDATE", "1")
-# what scgen learns of the machine (the libLLVM that renders) stays in this run: not the user's cache
+# what scgen learns of the machine (the libLLVM that renders, the sky's derived maps) stays in this run
+# (not the user's cache) and goes with it
 os.environ[CACHE_ENV] = tempfile.mkdtemp(prefix="scgen-test-cache-")
+atexit.register(shutil.rmtree, os.environ[CACHE_ENV], ignore_errors=True)
 # The modules that take minutes (2026-11-28, 2 cores: the learning test ~9.5 min, the detector's ~3,
 # packaging's ~2.5, scale-out's ~2), run first: `make test` spreads whole modules over pytest-xdist
 # workers in collection order, and one started last would run alone at the end.

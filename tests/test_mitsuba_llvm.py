@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from scgen.io.machine_cache import CACHE_ENV
 from scgen.render.mitsuba.llvm import (
-    CACHE_ENV,
     LIBLLVM_ENV,
     LIBLLVM_GLOBS,
     VERDICT_ENV,

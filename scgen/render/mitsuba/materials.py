@@ -10,12 +10,14 @@ Only shading changes: the geometry (and so every label) is the same triangles as
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 from typing import Any
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from scgen.io.machine_cache import cached_arrays
 from scgen.render.mitsuba.memory import aligned, channels, check_held, overwrite, own_scalars
 from scgen.scenes.finish import finished
 from scgen.scenes.materials import BUSBAR_COLOUR, CELLS_PER_SIZE, MATERIALS, Material
@@ -26,10 +28,16 @@ CRINKLE_SLOPE = 0.02  # the nominal crinkle's height-gradient scale
 
 
 @functools.cache
-def _crinkle_gradient(size: int = 512, waves: int = 64) -> tuple[np.ndarray, np.ndarray]:
+def _crinkle_gradient(size: int = 512, waves: int = 64) -> tuple[np.ndarray, ...]:
     """Height gradient (d/dx, d/dy per tile) of crumpled foil: a ridged sum of random integer-frequency
     plane waves (2 to 14 per tile, so about 4 to 28 creases per object size), creased where a wave
-    crosses zero; tileable."""
+    crosses zero; tileable. Made once on a machine (~0.2 s) and kept in scgen's cache."""
+    make = functools.partial(_make_crinkle_gradient, size, waves)
+    return cached_arrays(f"crinkle_gradient_{size}_{waves}", (Path(__file__),), (), make)
+
+
+def _make_crinkle_gradient(size: int, waves: int) -> tuple[np.ndarray, np.ndarray]:
+    """_crinkle_gradient, made from TEXTURE_SEED."""
     rng = np.random.default_rng(TEXTURE_SEED)
     y, x = np.mgrid[0:size, 0:size] / size
     h = np.zeros((size, size))

@@ -15,9 +15,12 @@ its disc from afar, and no crater smaller than a pixel aliases.
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
 import numpy as np
 
+from scgen.io.machine_cache import cached_arrays
+from scgen.render.sky import textures
 from scgen.render.sky.textures import equirect, periodic_noise
 
 MOON_MAP = (1024, 2048)  # equirectangular size of the height and albedo maps (0.18 deg a texel)
@@ -39,9 +42,15 @@ RESOLVED_PX = (4.0, 12.0)  # an octave fades in between these cell sizes in pixe
 
 
 @functools.lru_cache(maxsize=1)
-def moon_maps() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def moon_maps() -> tuple[np.ndarray, ...]:
     """(albedo, d height / d latitude, d height / (cos(latitude) d longitude)): equirectangular maps
-    (rows: latitude +90..-90), heights in Moon radii, so the slopes are in radians of tilt."""
+    (rows: latitude +90..-90), heights in Moon radii, so the slopes are in radians of tilt. Made once on
+    a machine (~1 s) and kept in scgen's cache (scgen.io.machine_cache): the same bits in every process."""
+    return cached_arrays("moon_maps", (Path(__file__), Path(textures.__file__)), (), _make_moon_maps)
+
+
+def _make_moon_maps() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """moon_maps, made from the one Moon's seed."""
     rng = np.random.default_rng(MOON_SEED)
     h, w = MOON_MAP
     iso = w / h  # periodic_noise's aspect that makes features round on the sphere's equator
