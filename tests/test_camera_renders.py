@@ -81,7 +81,8 @@ def _metadata(root: Path) -> list[dict[str, str]]:
 def test_ideal_camera_reproduces_the_images_from_before_the_stage(
     backend: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Up to cross-CPU float noise, except `complex` backgrounds, whose sun glare became the stage's flare.
+    """Up to cross-CPU float noise, except `complex` backgrounds, whose sun glare became the stage's flare
+    (Mitsuba's images were made again when its film took a tent filter: the JSON's provenance).
     Traced over the whole frame, as the stored images were; the region renders are held to the full frame
     by tests/test_blender_region.py and tests/test_mitsuba_region.py (Mitsuba's sampler seeds by wavefront
     lane, not by pixel, so its window is another draw of the same noise, not these pixels)."""

@@ -9,7 +9,8 @@ every sample: the target's triangles go into one mesh per finish BSDF, the props
 material class (slots), and the lights take the sample's direction and irradiance. Then the render
 replays a frozen recording (drjit.freeze) instead of tracing the path tracer through every live BSDF
 again (about 20 ms a sample at any image size); it records again only when the set of meshes, BSDFs or
-lights grows, a mesh outgrows its capacity, or the lights' bounding sphere changes.
+lights grows, a mesh outgrows its capacity, or the film takes a new size (the lights' bounding sphere is
+one for every sample, mitsuba.lights.steady_light_bounds).
 
 The path tracer renders only a window over the region the objects cover (scgen.render.region,
 mitsuba.window): the film is transparent and the sky is composited in numpy, so every pixel outside it
@@ -30,13 +31,13 @@ from trimesh.transformations import transform_points
 from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.camera import record_image, render_camera
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, MITSUBA_THREADS, check_quality, render_seed
-from scgen.render.mitsuba.lights import SceneLights, light_radius, sample_lights
+from scgen.render.mitsuba.lights import SceneLights, sample_lights
 from scgen.render.mitsuba.llvm import mitsuba_setup
 from scgen.render.mitsuba.materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
 from scgen.render.mitsuba.memory import aligned
 from scgen.render.mitsuba.ray_cull import may_hit
 from scgen.render.mitsuba.slots import MeshSlot, build_mesh, registry_id
-from scgen.render.mitsuba.window import REACH_PX, film_window
+from scgen.render.mitsuba.window import PIXEL_FILTER, REACH_PX, film_window
 from scgen.render.props import prop_mesh
 from scgen.render.region import Region, full_frame, region_render, scene_region
 from scgen.render.sky.backgrounds import background_image
@@ -66,7 +67,6 @@ class SampleMeshes:
         self.target: list[MeshSlot] = []
         self.props: list[MeshSlot] = []
         self.owners: list[np.ndarray] = []  # per prop mesh: index into SceneSpec.props, per triangle
-        self.extent = 0.0  # the largest |coordinate| of any corner (metres, camera frame)
         self.target_corners: list[np.ndarray] = []  # per target slot: its triangles' corners (3F x 3)
 
 
@@ -161,7 +161,6 @@ class MitsubaBackend:
             filled.add(name)
             layout.target.append(slot)
             layout.target_corners.append(corners)
-            layout.extent = max(layout.extent, float(np.abs(corners.astype(np.float32)).max()))
         for name, slot in self._target_slots.items():
             if name not in filled:
                 slot.fill(np.zeros((0, 3)), np.zeros((0, 2)))
@@ -172,7 +171,6 @@ class MitsubaBackend:
             uv = box_uv(local, np.asarray(m.faces), texture_scale(prop.material, max(prop.size)))
             corners = np.asarray(m.vertices)[np.asarray(m.faces)].reshape(-1, 3)
             by_material.setdefault(prop.material, []).append((k, corners, uv))
-            layout.extent = max(layout.extent, float(np.abs(corners.astype(np.float32)).max()))
         for material, slot in self._prop_slots.items():
             pieces = by_material.get(material, [])
             slot.fill(np.concatenate([c for _, c, _ in pieces] or [np.zeros((0, 3))]),
@@ -297,7 +295,7 @@ class MitsubaBackend:
         else:
             self._rebuild(self._scenes[key][0])
         scene, scene_lights = self._scenes[key]
-        scene_lights.set(lights, layout.extent)
+        scene_lights.set(lights)
         return scene
 
     def _shade(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> np.ndarray:
@@ -350,26 +348,26 @@ class MitsubaBackend:
     def _render(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes, window: Region) -> mi.TensorXf:
         """mi.render of `window` of `scene`'s frame (`spec` on its render camera), replayed from a frozen
         recording in a JIT variant. Its inputs name every live object the recorded kernels call into (the
-        other scenes' lights too) and, as plain values, what the recording bakes in: the lights' bounding
-        sphere, the meshes' capacities and the film's size."""
+        other scenes' lights too) and, as plain values, what the recording bakes in: the meshes'
+        capacities and the film's size (the lights' bounding sphere is one for all: steady_light_bounds)."""
         sensor = self._window_sensor(spec.camera, window) if self.trace_region else 0  # 0: the scene's own
         if not dr.is_jit_v(mi.Float):
             return mi.render(scene, sensor=sensor, seed=render_seed(spec))
         others = [e for other, _ in self._scenes.values() if other is not scene for e in other.emitters()]
         seed = dr.opaque(mi.UInt32, render_seed(spec))
-        radius, capacities = light_radius(layout.extent), self._capacities()
+        capacities = self._capacities()
         if not self.trace_region:
-            return self._frozen_render(scene, seed, radius, capacities, others)
+            return self._frozen_render(scene, seed, capacities, others)
         film = (window.x1 - window.x0, window.y1 - window.y0)
         if film not in self._frozen_windows:  # every input opaque: a size's few renders learn nothing
             self._frozen_windows[film] = dr.freeze(
                 _render_scene, limit=RECORDINGS_KEPT, warn_after=2**31 - 1, auto_opaque=False
             )
-        return self._frozen_windows[film](scene, seed, radius, capacities, others, sensor=sensor)
+        return self._frozen_windows[film](scene, seed, capacities, others, sensor=sensor)
 
 
 def _render_scene(
-    scene: mi.Scene, seed: mi.UInt32, radius: float, capacities: tuple, others: list, sensor: Any = 0
+    scene: mi.Scene, seed: mi.UInt32, capacities: tuple, others: list, sensor: Any = 0
 ) -> mi.TensorXf:
     """mi.render through `sensor` (the scene's own, or another), to be frozen: recorded once per distinct
     set of inputs, replayed after (see MitsubaBackend._render)."""
@@ -397,7 +395,7 @@ def _sensor(cam, spp: int, window: Region | None = None) -> dict:
             "width": width,
             "height": height,
             "pixel_format": "rgba",
-            "rfilter": {"type": "gaussian"},
+            "rfilter": dict(PIXEL_FILTER),
         },
         "sampler": {"type": "independent", "sample_count": spp},
     }

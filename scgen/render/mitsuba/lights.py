@@ -12,12 +12,13 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from scgen.render.conventions import CLIP_START_M, EARTHSHINE_COLOUR
+from scgen.render.conventions import CLIP_END_M, EARTHSHINE_COLOUR
 from scgen.render.lighting import body_albedo_light, sun_render_irradiance
 from scgen.render.mitsuba.memory import channels, check_held, overwrite, own_scalars
 from scgen.scenes.spec import SceneSpec
 
 ROTATION = [(r, c) for r in range(3) for c in range(3)]  # the entries of a light's frame that vary
+LIGHT_BOUNDS_HALF_M = CLIP_END_M  # no geometry renders beyond the far clip: the cube holds every scene
 LIGHT_KEYS = ("to_world", "irradiance.value")  # what a directional light takes from each sample
 
 
@@ -68,7 +69,6 @@ class SceneLights:
 
     def __init__(self, scene: mi.Scene, names: list[str]) -> None:
         self._scene = scene
-        self._radius = 0.0  # the half side of the cube the lights' bounding sphere encloses (none yet)
         self._params = mi.traverse(scene)
         self._params.keep([f"{name}.{key}" for name in names for key in LIGHT_KEYS])
         self._arrays: dict[str, list[mi.Float]] = {}  # per light: the Floats overwritten (see _varying)
@@ -80,6 +80,7 @@ class SceneLights:
             live = mi.traverse(scene)
             check_held([a for name in names for a in self._arrays[name]],
                        [a for name in names for a in _varying(live, name)], "lights")  # fmt: skip
+        steady_light_bounds(scene)  # after the update above, as a sample's rebuild leaves it
 
     def _own(self, name: str) -> None:
         """Give light `name`'s varying values memory of their own (see memory.own_scalars)."""
@@ -93,10 +94,9 @@ class SceneLights:
         self._params[f"{name}.to_world"] = mi.AffineTransform4f(*parts)
         self._params[f"{name}.irradiance.value"] = mi.Color3f(*own_scalars(c[0] for c in channels(colour)))
 
-    def set(self, lights: dict[str, dict], extent: float) -> None:
-        """Give the lights these values (sample_lights' dicts, one per light of the scene), and the bounding
-        sphere of a scene whose largest |coordinate| is `extent`. The caller has waited for the kernels
-        reading them (drjit.sync_thread)."""
+    def set(self, lights: dict[str, dict]) -> None:
+        """Give the lights these values (sample_lights' dicts, one per light of the scene). The caller has
+        waited for the kernels reading them (drjit.sync_thread)."""
         if not dr.is_jit_v(mi.Float):  # scalar_rgb: its values are plain numbers, set the usual way
             for name, light in lights.items():
                 new = mi.traverse(mi.load_dict(light))
@@ -108,10 +108,6 @@ class SceneLights:
                 matrix, inverse_transpose = directional_frame(light["direction"])
                 values = [m[r, c] for m in (matrix, inverse_transpose) for r, c in ROTATION]
                 overwrite(self._arrays[name], [*values, *irradiance_rgb(light)])
-        radius = light_radius(extent)
-        if radius != self._radius:
-            self._radius = radius
-            steady_light_bounds(self._scene, radius)
 
 
 def _varying(params: mi.SceneParameters, name: str) -> list[mi.Float]:
@@ -121,17 +117,14 @@ def _varying(params: mi.SceneParameters, name: str) -> list[mi.Float]:
     return rotation + channels(colour)
 
 
-def light_radius(extent: float) -> float:
-    """The half side of the cube the lights' bounding sphere encloses: the power of two at least `extent`
-    (the scene's largest |coordinate|), so that it changes seldom."""
-    return float(2.0 ** np.ceil(np.log2(max(extent, CLIP_START_M))))
-
-
-def steady_light_bounds(scene: mi.Scene, half: float) -> None:
-    """Give the directional lights a bounding sphere about the camera, that of a cube of half side `half`
-    (light_radius): they keep their scene's sphere as constants of the render kernel, so the scene's own
-    sphere compiled a new kernel for every sample (and a frozen render would replay a stale one)."""
-    cube = {"type": "cube", "to_world": mi.ScalarTransform4f().scale([half] * 3)}
+def steady_light_bounds(scene: mi.Scene) -> None:
+    """Give the directional lights one bounding sphere about the camera for every sample: that of a cube
+    of half side LIGHT_BOUNDS_HALF_M. They keep it as constants of the render kernel, so the scene's own
+    sphere compiled a new kernel for every sample (and a frozen render would replay a stale one). The
+    sphere only sets how far a shadow ray towards the light is cast (twice its radius, or the point's
+    distance from its centre): far enough past any geometry, a longer ray finds the same occluders, so
+    one sphere holding every scene serves all of them, with no recording per scene size."""
+    cube = {"type": "cube", "to_world": mi.ScalarTransform4f().scale([LIGHT_BOUNDS_HALF_M] * 3)}
     bounds = mi.load_dict({"type": "scene", "cube": cube})
     for emitter in scene.emitters():
         emitter.set_scene(bounds)
