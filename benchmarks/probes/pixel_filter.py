@@ -26,19 +26,14 @@ from harness import parser, run_script
 
 from scgen.render.blender.settings import FILTER_WIDTH_PX
 from scgen.render.mitsuba.backend import select_variant
+from scgen.render.mitsuba.window import PIXEL_FILTER
 
 SIZE, SPP, FOCAL_PX, DEPTH_M = (640, 480), 16, 800.0, 10.0
-FILTERS = {
-    "gaussian 0.5 px (Mitsuba's default; scgen's before)": {"type": "gaussian"},
-    "tent, radius 1 px (scgen's now)": {"type": "tent", "radius": 1.0},
-    "gaussian 0.25 px": {"type": "gaussian", "stddev": 0.25},
-    "box": {"type": "box"},
-}
-SPREAD_PX = {  # standard deviation of each filter's weight, px
-    "gaussian 0.5 px (Mitsuba's default; scgen's before)": 0.5,
-    "tent, radius 1 px (scgen's now)": 1 / math.sqrt(6),
-    "gaussian 0.25 px": 0.25,
-    "box": 1 / math.sqrt(12),
+FILTERS = {  # name: (Mitsuba's film filter, the standard deviation of its weight in px)
+    "gaussian 0.5 px (Mitsuba's default; scgen's before)": ({"type": "gaussian"}, 0.5),
+    "tent, radius 1 px (scgen's now)": (PIXEL_FILTER, 1 / math.sqrt(6)),
+    "gaussian 0.25 px": ({"type": "gaussian", "stddev": 0.25}, 0.25),
+    "box": ({"type": "box"}, 1 / math.sqrt(12)),
 }
 
 
@@ -76,7 +71,7 @@ def run(args) -> None:
     dr.set_thread_count(1)
     print(f"Mitsuba, {SIZE[0]}x{SIZE[1]}, {SPP} spp, one thread: fastest of {args.rounds} renders, ms")
     for cover in (0.0, 0.1, 0.5):
-        scenes = {name: scene(f, cover) for name, f in FILTERS.items()}
+        scenes = {name: scene(dict(f), cover) for name, (f, _) in FILTERS.items()}
         for s in scenes.values():  # warm-up: each filter's kernel compiled once
             dr.eval(mi.render(s, seed=0))
         best = dict.fromkeys(scenes, math.inf)
@@ -90,7 +85,7 @@ def run(args) -> None:
               + ", ".join(f"{name.split(' (')[0]} {1000 * t:.0f}" for name, t in best.items()))  # fmt: skip
     print(f"spread (standard deviation, px): Cycles' Blackman-Harris at {FILTER_WIDTH_PX} px "
           f"{blackman_harris_spread(FILTER_WIDTH_PX):.3f}; "
-          + ", ".join(f"{name} {s:.3f}" for name, s in SPREAD_PX.items()))  # fmt: skip
+          + ", ".join(f"{name} {spread:.3f}" for name, (_, spread) in FILTERS.items()))  # fmt: skip
 
 
 if __name__ == "__main__":

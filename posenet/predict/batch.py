@@ -200,7 +200,9 @@ class BatchPredictor:
         solved: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
         for k in range(p.passes):  # after the first, re-crops around the model's box at the pose before
             if k:  # as Predictor.__call__: an image whose pose projects to no box stops there
+                tic = time.perf_counter()
                 again = {i: projected_box(p.obj.vertices, *solved[i][:2], p.camera) for i in todo}
+                self._spent("crop", tic, len(todo))
                 todo = [i for i in todo if again[i] is not None]
                 for i in todo:
                     crops[i].append(again[i])  # type: ignore[arg-type]

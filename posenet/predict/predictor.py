@@ -207,7 +207,8 @@ class Predictor:
         R, t, confidence = self._estimate(seen, train_box)
         crops = [train_box]
         for _ in range(self.passes - 1):  # re-crop around the box of the model at the pose just decoded
-            again = projected_box(self.obj.vertices, R, t, self.camera)
+            with _Clock(self.timings, "crop"):
+                again = projected_box(self.obj.vertices, R, t, self.camera)
             if again is None:
                 break
             R, t, confidence = self._estimate(seen, again)

@@ -5,9 +5,10 @@ reads scgen datasets through (tests/test_layering.py holds it to that).
 absent), `exr` (xyz maps in OpenEXR), `image_file` (decoding images, and why one cannot be read),
 `buffers` (what a renderer hands to annotation and the writer), `camera_presets` (the `--camera` presets
 and each one's intrinsics), `sequence_frames` (which rendezvous frame each image is, from metadata.csv),
-`cores` (the cores a process may run on: default workers and threads), `yaml_file` (YAML configs with YAML
-1.2's floats, 1e-3 included), `output_path` (the one rule for an output path) and `parent_watch` (worker
-pools that end with their parent). The names below are posenet's interface.
+`cores` (the cores a process may run on: default workers and threads), `machine_cache` (what scgen keeps
+on a machine between runs), `yaml_file` (YAML configs with YAML 1.2's floats, 1e-3 included),
+`output_path` (the one rule for an output path) and `parent_watch` (worker pools that end with their
+parent). The names below are posenet's interface.
 """
 
 from scgen.errors import ScgenError

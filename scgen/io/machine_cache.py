@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import importlib.metadata
 import io
 import json
 import os
@@ -17,29 +16,30 @@ import zipfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from scgen.io.atomic import atomic_write_bytes
 
 CACHE_ENV = "SCGEN_CACHE_DIR"
 ARRAYS_KEPT = 2  # entries kept per name: an upgrade's new one beside the last, then the oldest goes
-VERSIONS = ("numpy", "opencv-python-headless")  # the libraries whose arithmetic the arrays come from
 
 
 def cache_dir() -> Path:
     """SCGEN_CACHE_DIR, else XDG_CACHE_HOME/scgen or ~/.cache/scgen (RuntimeError: no home to find)."""
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(os.environ.get(CACHE_ENV) or Path(base) / "scgen")
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "scgen"
 
 
 def inputs_digest(code: Sequence[Path], data: Sequence[Path]) -> str:
     """A digest of what arrays are made from: the code that makes them (its bytes), the files it reads
-    (size and modification time) and the versions of VERSIONS."""
+    (size and modification time), and the numpy and OpenCV they are made with."""
     digest = hashlib.sha256()
     for path in code:
         digest.update(Path(path).read_bytes())
-    stats = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in map(Path, data)]
-    digest.update(json.dumps([stats, [_version(name) for name in VERSIONS]]).encode())
+    stats = [(str(p), (st := p.stat()).st_size, st.st_mtime_ns) for p in map(Path, data)]
+    digest.update(json.dumps([stats, np.__version__, cv2.__version__]).encode())
     return digest.hexdigest()[:20]
 
 
@@ -61,10 +61,11 @@ def cached_arrays(
 
 
 def _entry(name: str, code: Sequence[Path], data: Sequence[Path]) -> Path | None:
-    """The cache file of these inputs, or None where there is no cache folder to name (no home)."""
+    """The cache file of these inputs, or None where there is no cache folder to name (no home) or the
+    inputs cannot be read."""
     try:
         return cache_dir() / f"{name}-{inputs_digest(code, data)}.npz"
-    except RuntimeError:
+    except (RuntimeError, OSError):  # no home; code or data that cannot be read as files (a zipped package)
         return None
 
 
@@ -74,13 +75,8 @@ def _keep(path: Path, name: str, arrays: tuple[np.ndarray, ...]) -> None:
     buffer = io.BytesIO()
     np.savez(buffer, *arrays)  # stored, not compressed: read back at disk speed
     atomic_write_bytes(path, buffer.getvalue())
-    entries = sorted(path.parent.glob(f"{name}-*.npz"), key=lambda p: p.stat().st_mtime_ns)
-    for stale in entries[:-ARRAYS_KEPT]:
+    others = sorted(
+        (p for p in path.parent.glob(f"{name}-*.npz") if p != path), key=lambda p: p.stat().st_mtime_ns
+    )
+    for stale in others[: max(len(others) - (ARRAYS_KEPT - 1), 0)]:  # the newest others stay beside `path`
         stale.unlink(missing_ok=True)
-
-
-def _version(name: str) -> str:
-    try:
-        return importlib.metadata.version(name)
-    except importlib.metadata.PackageNotFoundError:
-        return ""

@@ -190,9 +190,9 @@ class MitsubaBackend:
 
     def render(self, spec: SceneSpec) -> Buffers:
         layout = self._fill(spec)
-        scene = self._scene(spec, layout)
+        scene = self._scene(spec)
         buffers = self._passes(spec, scene, layout)
-        buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, scene, layout), buffers.instance)
+        buffers.rgb, buffers.camera = record_image(spec, self._shade(spec, scene), buffers.instance)
         return buffers
 
     def render_geometry(self, spec: SceneSpec) -> Buffers:
@@ -280,7 +280,7 @@ class MitsubaBackend:
         gap2 = centre @ centre - along**2  # squared distance from the sphere's centre to the ray's line
         return (gap2 <= self._reach**2) & (t <= along + np.sqrt(np.maximum(self._reach**2 - gap2, 0.0)))
 
-    def _scene(self, spec: SceneSpec, layout: SampleMeshes) -> mi.Scene:
+    def _scene(self, spec: SceneSpec) -> mi.Scene:
         """The path tracer's scene, holding every slot (filled for `spec`), the sun (and earthshine), the
         render camera (scgen.render.camera.lens) and its film: built once per camera and Earth's light,
         then given each sample's lights; its BVH is rebuilt for the refilled meshes."""
@@ -298,11 +298,11 @@ class MitsubaBackend:
         scene_lights.set(lights)
         return scene
 
-    def _shade(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes) -> np.ndarray:
+    def _shade(self, spec: SceneSpec, scene: mi.Scene) -> np.ndarray:
         """The linear composite over the background, on the render camera (scgen.render.camera.lens)."""
         shown = replace(spec, camera=render_camera(spec.camera))
         self.window = film_window(self.region(shown))
-        img = np.asarray(self._render(shown, scene, layout, self.window), dtype=np.float32)
+        img = np.asarray(self._render(shown, scene, self.window), dtype=np.float32)
         img = self.window.paste(img, 0.0)  # a pixel outside renders (0, 0, 0, 0): it meets nothing
         fg, alpha = img[..., :3], img[..., 3:4]
         return fg + (1.0 - np.clip(alpha, 0, 1)) * background_image(shown)
@@ -345,7 +345,7 @@ class MitsubaBackend:
     def _capacities(self) -> tuple[int, ...]:
         return tuple(s.capacity for s in self._slots())
 
-    def _render(self, spec: SceneSpec, scene: mi.Scene, layout: SampleMeshes, window: Region) -> mi.TensorXf:
+    def _render(self, spec: SceneSpec, scene: mi.Scene, window: Region) -> mi.TensorXf:
         """mi.render of `window` of `scene`'s frame (`spec` on its render camera), replayed from a frozen
         recording in a JIT variant. Its inputs name every live object the recorded kernels call into (the
         other scenes' lights too) and, as plain values, what the recording bakes in: the meshes'

@@ -68,7 +68,6 @@ class SceneLights:
     are given (steady_light_bounds)."""
 
     def __init__(self, scene: mi.Scene, names: list[str]) -> None:
-        self._scene = scene
         self._params = mi.traverse(scene)
         self._params.keep([f"{name}.{key}" for name in names for key in LIGHT_KEYS])
         self._arrays: dict[str, list[mi.Float]] = {}  # per light: the Floats overwritten (see _varying)
@@ -121,9 +120,9 @@ def steady_light_bounds(scene: mi.Scene) -> None:
     """Give the directional lights one bounding sphere about the camera for every sample: that of a cube
     of half side LIGHT_BOUNDS_HALF_M. They keep it as constants of the render kernel, so the scene's own
     sphere compiled a new kernel for every sample (and a frozen render would replay a stale one). The
-    sphere only sets how far a shadow ray towards the light is cast (twice its radius, or the point's
-    distance from its centre): far enough past any geometry, a longer ray finds the same occluders, so
-    one sphere holding every scene serves all of them, with no recording per scene size."""
+    sphere only sets how far a shadow ray towards the light is cast (twice the larger of its radius and
+    the point's distance from its centre): far enough past any geometry, a longer ray finds the same
+    occluders, so one sphere holding every scene serves all of them, with no recording per scene size."""
     cube = {"type": "cube", "to_world": mi.ScalarTransform4f().scale([LIGHT_BOUNDS_HALF_M] * 3)}
     bounds = mi.load_dict({"type": "scene", "cube": cube})
     for emitter in scene.emitters():

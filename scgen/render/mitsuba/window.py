@@ -19,9 +19,9 @@ from scgen.render.region import Region
 # is Cycles' Blackman-Harris at scgen's 1.5 px width (the window spans +-1.5 px: 0.416 px), so the two
 # backends blur alike before the camera stage's PSF. Mitsuba's default gaussian (0.5 px, radius 2 px) was
 # softer and splats each sample into 25 pixels where the tent's 3 x 3 take 9: the splat was most of an
-# empty pixel's cost (docs/benchmarks.md, "Mitsuba's pixel filter").
-PIXEL_FILTER = {"type": "tent", "radius": 1.0}
-FILTER_RADIUS_PX = PIXEL_FILTER["radius"]  # a sample reaches this far from its pixel's centre
+# empty pixel's cost (docs/benchmarks.md, "Mitsuba: the pixel filter, the sky's maps kept, one light sphere").
+FILTER_RADIUS_PX = 1.0  # a sample reaches this far from its pixel's centre
+PIXEL_FILTER: dict[str, str | float] = {"type": "tent", "radius": FILTER_RADIUS_PX}
 # A pixel's value is its samples' filter-weighted mean, misses included: a pixel within the filter's
 # radius of an object is exact only if every sample within that radius of it is drawn, and those lie in
 # pixels whose centre is up to another radius and half a pixel farther.

