@@ -10,18 +10,17 @@ from typing import Any
 import cv2
 import torch
 
-from posenet.errors import PosenetError
 from posenet.predict.batch import BatchPredictor
 from posenet.predict.predictor import STAGES, Predictor
+from posenet.predict.sources import resolve_source
 
 SHOWN = [s for s in STAGES if s != "drawing"]  # the stages a benchmark reports (nothing is drawn)
 
 
 def images_of(folder: Path, n: int) -> list[Path]:
-    paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".jpg", ".jpeg", ".png"))[:n]
-    if not paths:
-        raise PosenetError(f"{folder} holds no .jpg or .png images")
-    return paths
+    """The first `n` images of `folder`, as `posenet predict FOLDER` finds them (its one-line error for
+    none)."""
+    return list(resolve_source(str(folder)).images[:n])
 
 
 def measure(
