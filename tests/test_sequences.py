@@ -20,8 +20,8 @@ from scgen.dataset.validate import check_sequences
 from scgen.errors import ScgenError
 from scgen.scenes import load_config
 from scgen.scenes.attitude import nominal_rotation, ray_rotation
-from scgen.scenes.motion.orbit import PROFILES
-from scgen.scenes.motion.sequence import draw_sequence, minimal_rotation
+from scgen.scenes.motion.orbit import PROFILES, R_EARTH, hcw_acceleration, mean_motion
+from scgen.scenes.motion.sequence import POINTING_MODES, draw_sequence, minimal_rotation
 from scgen.scenes.motion.tumble import ATTITUDE_MODES, mass_properties
 
 
@@ -59,6 +59,36 @@ def test_consecutive_poses_differ_by_the_labelled_motion(profile: str, pointing:
         # turn (n ~ 1.1e-3 rad/s) or the camera's would miss by > 5e-4 rad
         assert np.abs(turned - dt * 0.5 * (w[1:] + w[:-1])).max() < 2e-5
     assert seen == set(ATTITUDE_MODES)  # 12 sequences draw all four modes (a fixed seed: checked here)
+
+
+@pytest.mark.parametrize("pointing", POINTING_MODES)
+def test_the_chasers_own_state_is_the_one_its_frames_move_by(pointing: str):
+    """What a navigation filter reads of the chaser (cam_q*, cam_w*, thrust_*): the camera's attitude in
+    LVLH turns between frames by its labelled rate (camera axes: R_LC(t + dt) = R_LC(t) exp(dt w)), and
+    the labelled thrust, plus the free HCW acceleration, is the acceleration of the chaser's own track
+    (the centre of mass relative to the camera, -R_LC (t + R c) in LVLH: its second difference)."""
+    dt = 0.5
+    for profile in PROFILES:
+        gen = sequence_generator(frames=12, dt_s=dt, profile_probs={profile: 1.0}, pointing=pointing)
+        c = mass_properties([mesh for _, mesh in gen.model.parts]).centre_of_mass
+        frames = [sp.sequence for sp in gen.sequence(0)]
+        R_lc = Rotation.from_quat([np.roll(f.camera_attitude, -1) for f in frames]).as_matrix()
+        w = np.array([f.camera_rate for f in frames])
+        turned = Rotation.from_matrix(np.swapaxes(R_lc[:-1], 1, 2) @ R_lc[1:]).as_rotvec()
+        # the mean rate's error is O(dt^3 |w'| |w|) and the transport's discrete steps of the same order:
+        # < 1e-8 rad at these rates; a rate in LVLH axes, or of the wrong sign, misses by ~dt |w|
+        assert np.abs(turned - dt * 0.5 * (w[1:] + w[:-1])).max() < 1e-6 + 1e-3 * dt * np.abs(w).max()
+        n = mean_motion(R_EARTH + 1e3 * frames[0].altitude_km)
+        com = np.array([sp.target.t_vec + sp.target.R_mat @ c for sp in gen.sequence(0)])
+        r = -np.einsum("kij,kj->ki", R_lc, com)  # the chaser from the target, LVLH, model metres
+        accel = (r[2:] - 2 * r[1:-1] + r[:-2]) / dt**2
+        v = (r[2:] - r[:-2]) / (2 * dt)
+        thrust = np.array([f.thrust for f in frames])[1:-1]
+        # the differences' errors are dt^2 |r'''| / 6 and dt^2 |r''''| / 12: at n ~ 1e-3 rad/s, ~1e-9 of the
+        # HCW terms; a thrust of the wrong sign or scale misses by its own size
+        free = hcw_acceleration(r[1:-1], v, n)
+        size = np.abs(free).max() + np.abs(thrust).max()
+        assert np.abs(accel - free - thrust).max() <= 1e-6 * size + 1e-15, profile
 
 
 def test_a_frame_is_the_same_whatever_frames_are_asked():

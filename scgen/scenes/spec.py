@@ -172,6 +172,7 @@ class ImagingSpec:
 SEQUENCE_COLUMNS = (
     "sequence_id", "frame", "time_s", "vx", "vy", "vz", "wx", "wy", "wz", "eclipse", "profile",
     "attitude_mode", "range_m", "altitude_km",
+    "cam_qw", "cam_qx", "cam_qy", "cam_qz", "cam_wx", "cam_wy", "cam_wz", "thrust_x", "thrust_y", "thrust_z",
 )  # fmt: skip  # metadata.csv's columns of a sequence frame (docs/dataset.md)
 
 
@@ -183,6 +184,11 @@ class SequenceFrame:
     `angular_velocity`: the target's angular velocity relative to the camera (rad/s, camera axes), so
     dR/dt = [w]x R. `range_m` is the chaser-target distance in metres of the real spacecraft (before the
     scale to the model); `eclipse`: the target in the Earth's shadow.
+
+    What the chaser knows of itself, which a navigation filter may use (posenet.navigation): its camera's
+    attitude in LVLH `camera_attitude` (a quaternion w, x, y, z, camera -> LVLH), the camera's angular
+    velocity relative to LVLH `camera_rate` (rad/s, camera axes), and its own thrust acceleration
+    `thrust` (LVLH axes, m/s^2 of the model frame's scale, as velocity is; impulses not included).
     """
 
     sequence: int
@@ -195,12 +201,16 @@ class SequenceFrame:
     attitude: str
     range_m: float
     altitude_km: float
+    camera_attitude: tuple[float, float, float, float]
+    camera_rate: tuple[float, float, float]
+    thrust: tuple[float, float, float]
 
     def labels(self) -> dict[str, Any]:
         """The metadata.csv columns (SEQUENCE_COLUMNS) of this frame."""
         (vx, vy, vz), (wx, wy, wz) = self.velocity, self.angular_velocity
         values = (self.sequence, self.frame, self.time_s, vx, vy, vz, wx, wy, wz, int(self.eclipse),
-                  self.profile, self.attitude, self.range_m, self.altitude_km)  # fmt: skip
+                  self.profile, self.attitude, self.range_m, self.altitude_km, *self.camera_attitude,
+                  *self.camera_rate, *self.thrust)  # fmt: skip
         return dict(zip(SEQUENCE_COLUMNS, values, strict=True))
 
 
@@ -274,9 +284,8 @@ class SceneSpec:
 
 
 def _sequence_frame(d: dict[str, Any]) -> SequenceFrame:
-    return SequenceFrame(
-        **{**d, "velocity": tuple(d["velocity"]), "angular_velocity": tuple(d["angular_velocity"])}
-    )
+    vectors = ("velocity", "angular_velocity", "camera_attitude", "camera_rate", "thrust")
+    return SequenceFrame(**{**d, **{k: tuple(d[k]) for k in vectors}})
 
 
 def _imaging(d: dict[str, Any]) -> ImagingSpec:

@@ -26,6 +26,7 @@ from scgen.scenes.attitude import ConeDraw, sample_attitude
 from scgen.scenes.config.camera import CameraSettings
 from scgen.scenes.config.checks import check_choice, check_range, is_number
 from scgen.scenes.finish import sample_finish
+from scgen.scenes.geometry import matrix_to_quat
 from scgen.scenes.imaging import sample_imaging
 from scgen.scenes.motion.orbit import (
     NADIR_LVLH,
@@ -256,8 +257,9 @@ def draw_sequence(
 @dataclass(frozen=True)
 class Track:
     """A sequence's geometry at each frame time, in the camera frame (model-frame metres): the target's
-    pose (R, t), their rates (dt/dt, angular velocity, camera axes), R_LC, the sun, the Earth's centre
-    direction, the eclipse flag, the range (real metres), and R_CI (inertial -> camera)."""
+    pose (R, t), their rates (dt/dt, angular velocity, camera axes), R_LC, the camera's rate relative to
+    LVLH (camera axes), the chaser's thrust acceleration (LVLH, model-frame metres), the sun, the Earth's
+    centre direction, the eclipse flag, the range (real metres), and R_CI (inertial -> camera)."""
 
     t_s: np.ndarray
     R: np.ndarray
@@ -265,6 +267,8 @@ class Track:
     velocity: np.ndarray
     omega: np.ndarray
     R_lc: np.ndarray
+    camera_rate: np.ndarray
+    thrust: np.ndarray
     sun: np.ndarray
     nadir: np.ndarray
     eclipse: np.ndarray
@@ -315,8 +319,11 @@ def sequence_track(
     velocity = np.einsum("kij,kj->ki", R_cl, -scale * v + np.cross(w_cl, scale * r)) - np.cross(omega, Rc)
     sun_l = sun_direction_lvlh(draw.sun, n, times)
     R_ci = R_cl @ np.swapaxes(lvlh_to_inertial(n, times), -1, -2)
-    return Track(times, R, t, velocity, omega, R_lc, np.einsum("kij,kj->ki", R_cl, sun_l),
-                 R_cl @ NADIR_LVLH, in_eclipse(sun_l, a), rho, R_ci)  # fmt: skip
+    camera_rate = np.einsum("kij,kj->ki", R_cl, w_cl)
+    thrust = scale * draw.profile.thrust(n, times)
+    sun = np.einsum("kij,kj->ki", R_cl, sun_l)
+    return Track(times, R, t, velocity, omega, R_lc, camera_rate, thrust, sun, R_cl @ NADIR_LVLH,
+                 in_eclipse(sun_l, a), rho, R_ci)  # fmt: skip
 
 
 def motion_blur(
@@ -403,6 +410,9 @@ def sample_sequence(
                     attitude=draw.attitude.mode,
                     range_m=float(track.range_m[k]),
                     altitude_km=draw.altitude_m / 1e3,
+                    camera_attitude=tuple(float(x) for x in matrix_to_quat(track.R_lc[k])),
+                    camera_rate=tuple(float(x) for x in track.camera_rate[k]),
+                    thrust=tuple(float(x) for x in track.thrust[k]),
                 ),
             )  # fmt: skip
         )
