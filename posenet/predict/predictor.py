@@ -37,8 +37,8 @@ from posenet.data.layout import image_size, scan_split
 from posenet.data.object_model import ObjectModel, load_object_model, object_from_record
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose, mask_probability
+from posenet.predict.confidence import pose_confidence
 from posenet.predict.pixels import to_bgr8
-from posenet.predict.ransac import MIN_POINTS, correspondences
 from posenet.predict.recrop import PREDICT_PASSES, projected_box
 
 LOW_CONFIDENCE = 0.5  # below: the pose is flagged low_confidence
@@ -232,15 +232,10 @@ class Predictor:
             return R, t, self._confidence(out, roi, R, t)
 
     def _confidence(self, out: dict[str, torch.Tensor], roi: Any, R: np.ndarray, t: np.ndarray) -> float:
-        """Self-consistency of the network's two answers: the share of pixels of its visible mask whose
-        predicted model point (xyz head) the pose (Patch-PnP) projects back within one output cell."""
+        """posenet.predict.confidence of one pass's heads at its pose, in the training camera."""
         visible = (mask_probability(out["mask"].float(), self.mask_type)[0, 0] > 0.5).cpu().numpy()
         xyz = out["xyz"][0].float().cpu().numpy()
-        points, pixels = correspondences(xyz, visible, self.obj.extent, roi.center, roi.scale)
-        if len(points) < MIN_POINTS:
-            return 0.0
-        error = np.linalg.norm(project(points, R, t, self.camera) - pixels, axis=1)  # a pinhole camera
-        return float(np.mean(error <= roi.scale / self.output_res))
+        return pose_confidence(xyz, visible, self.obj.extent, roi.center, roi.scale, R, t, self.camera)
 
 
 def detect_box(detector: Detector | None, image: np.ndarray) -> tuple[Box, float] | None:
