@@ -1,0 +1,73 @@
+"""A filter state as a user reads it: the pose, velocity and angular velocity in the camera frame at a
+frame's time, with their covariance.
+
+Outputs, camera axes (as scgen labels a sequence frame, docs/sequences.md): R (camera from model) and t
+(the model origin, m); the velocity dt/dt (m/s) and the target's angular velocity relative to the camera
+w (rad/s, dR/dt = [w]x R). With the state's p, v (N), R_AB, w_B and the camera's frames:
+
+    R = R_CA R_AB,    t = R_CN p - R c,    w = R w_B - w_CA,
+    dt/dt = R_CN v - w_CN x (R_CN p) - w x (R c)
+
+Their covariance is J P J^T, J the Jacobian of these outputs in the error state, by central differences
+(each output is smooth in it; a step of 1e-6 in SI units leaves ~1e-12 of truncation); the rotation's
+error is the rotation vector of R_true R^T, camera axes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from posenet.navigation.filter import DIM, CameraFrames, NavState
+from posenet.navigation.so3 import log
+
+STEP = 1e-6  # the central differences' step, in the error state's SI units
+T, ROT, VEL, OMEGA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)  # blocks of Estimate.cov
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The pose and motion at `time` in camera axes, and `cov` (12x12) over [t, rotation, velocity, w]."""
+
+    time: float
+    R: np.ndarray
+    t: np.ndarray
+    velocity: np.ndarray
+    omega: np.ndarray
+    cov: np.ndarray
+
+    def sigma(self, block: slice) -> np.ndarray:
+        """The 1-sigma of each axis of a block (T, ROT, VEL, OMEGA)."""
+        return np.sqrt(np.clip(np.diag(self.cov[block, block]), 0.0, None))
+
+    def nees(self, block: slice, error: np.ndarray) -> float:
+        """error^T cov^-1 error of one block's error (truth minus estimate; rotation: log(R_true R^T))."""
+        return float(error @ np.linalg.solve(self.cov[block, block], error))
+
+
+def _outputs(state: NavState, frames: CameraFrames, c: np.ndarray) -> tuple[np.ndarray, ...]:
+    R = frames.R_ac.T @ state.R
+    p_c = frames.R_nc.T @ state.p
+    Rc = R @ c
+    t = p_c - Rc
+    w = R @ state.w - frames.w_ca
+    velocity = frames.R_nc.T @ state.v - np.cross(frames.w_cn, p_c) - np.cross(w, Rc)
+    return R, t, velocity, w
+
+
+def camera_estimate(state: NavState, frames: CameraFrames, centre_of_mass: np.ndarray) -> Estimate:
+    """`state` in the camera frame of `frames`, with its covariance."""
+    c = np.asarray(centre_of_mass, np.float64)
+    R, t, velocity, w = _outputs(state, frames, c)
+    J = np.zeros((DIM, DIM))
+    for i in range(DIM):
+        dx = np.zeros(DIM)
+        dx[i] = STEP
+        hi, lo = _outputs(state.plus(dx), frames, c), _outputs(state.plus(-dx), frames, c)
+        J[T, i] = (hi[1] - lo[1]) / (2 * STEP)
+        J[ROT, i] = (log(hi[0] @ R.T) - log(lo[0] @ R.T)) / (2 * STEP)
+        J[VEL, i] = (hi[2] - lo[2]) / (2 * STEP)
+        J[OMEGA, i] = (hi[3] - lo[3]) / (2 * STEP)
+    cov = J @ state.P @ J.T
+    return Estimate(state.time, R, t, velocity, w, 0.5 * (cov + cov.T))
