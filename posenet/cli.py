@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +24,7 @@ from posenet.detection.detector import load_detector_config
 from posenet.detection.train import BEST, train_detector
 from posenet.doctor import check_config_packages
 from posenet.errors import PosenetError
+from posenet.evaluation.calibration import CALIBRATION_SPLIT, calibrate_noise
 from posenet.evaluation.evaluate import (
     BATCH_SIZE,
     by_factor_table,
@@ -33,10 +34,13 @@ from posenet.evaluation.evaluate import (
     summary_rows,
 )
 from posenet.evaluation.evaluate import by_factor as run_by_factor
+from posenet.evaluation.navigation import NAVIGATION_LEGEND, navigate_split, navigation_table
 from posenet.evaluation.sequences import per_sequence, sequence_table
 from posenet.evaluation.viz import heatmap_panel, overlay_panel
 from posenet.export.bench import PAPER, device_label, format_report, resolve_device, run_bench
 from posenet.models import VARIANTS
+from posenet.navigation.filter import NavConfig
+from posenet.navigation.noise import noise_path
 from posenet.predict.batch import BatchPredictor
 from posenet.predict.inputs import predict_inputs
 from posenet.predict.ransac import PNP_LABELS, PNP_METHODS
@@ -68,6 +72,21 @@ def passes_option(default: int, why: str) -> Callable[[Callable[..., Any]], Call
         help="Pose network runs per image: 1 on the box, then each re-cropped around the model's box at the "
         f"pose before (posenet.predict.recrop); {why}",
     )
+
+
+def filter_options(command: Callable[..., Any]) -> Callable[..., Any]:
+    """eval's and predict's settings of the navigation filter (posenet.navigation.filter.NavConfig); the
+    process noise is in diameters of the target, so one default fits any model scale."""
+    defaults = NavConfig()
+    for name, attr, text in (
+        ("--accel-noise", "accel_noise", "the acceleration it leaves out, sqrt PSD (diameters / s^1.5)"),
+        ("--angular-accel-noise", "angular_accel_noise", "the angular one, sqrt PSD (rad / s^1.5)"),
+    ):  # fmt: skip
+        command = click.option(
+            name, attr, type=click.FloatRange(min=0, min_open=True), default=getattr(defaults, attr),
+            show_default=True, help=f"Navigation filter: {text}.",
+        )(command)  # fmt: skip
+    return command
 
 
 @click.group(cls=OneLineErrorGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -171,6 +190,7 @@ def train(
     help="Pose solver: the network's Patch-PnP, OpenCV's PnP-RANSAC on its predicted xyz and mask, or both.",
 )
 @passes_option(1, "eval gives the box IoU with the true box per pass; 1 is the paper's protocol.")
+@filter_options
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json, --predictions or --bop-csv.")
 def eval_cmd(
     data: Path,
@@ -186,6 +206,8 @@ def eval_cmd(
     bop_csv: Path | None,
     pnp: str,
     passes: int,
+    accel_noise: float,
+    angular_accel_noise: float,
     overwrite: bool,
 ) -> None:
     """Rotation/translation error, ADD@0.02 m, ADD@0.1d (and what the rotation and the translation each
@@ -195,7 +217,8 @@ def eval_cmd(
     the smallest over the symmetric poses of the ground truth. With --pnp both, each figure is given for
     Patch-PnP and PnP-RANSAC side by side. On a split of rendezvous sequences, a table per sequence adds
     its error along time and the frame-to-frame jitter of the estimate beside the truth's (--json:
-    `sequences`).
+    `sequences`), and, where the checkpoint's noise is calibrated (posenet calibrate), the navigation
+    filter's and smoother's figures beside the per-frame ones (--json: `navigation`).
     """
     methods = PNP_METHODS if pnp == "both" else (pnp,)
     if bop_csv is not None and len(methods) > 1:
@@ -237,6 +260,9 @@ def eval_cmd(
     for m, figures in per_sequence(data, split, results).items():  # a sequence dataset: the tracker baseline
         results[m].summary["sequences"] = figures
         click.echo(sequence_table(figures, f"sequence ({PNP_LABELS[m]})" if len(methods) > 1 else "sequence"))
+    if results[methods[0]].summary.get("sequences") is not None:
+        nav_config = replace(NavConfig(), accel_noise=accel_noise, angular_accel_noise=angular_accel_noise)
+        navigation_summary(data, split, ckpt[0], results[methods[0]], nav_config)
     records = [{**json_record(r), "pnp": m} for m, res in results.items() for r in res.records]
     write_output(predictions, "".join(json.dumps(r) + "\n" for r in records))
     if json_path is not None:
@@ -429,6 +455,47 @@ def export_detector_graph(detector: Path, path: Path, pose_state: dict, ckpt: Pa
     export_detector_onnx(model, path, size, state["model_config"]["score_thresh"])
 
 
+def navigation_summary(data: Path, split: str, ckpt: Path, result: Any, config: NavConfig) -> None:
+    """eval's navigation table on a sequence split (per frame, filtered, smoothed), into the summary; a
+    line saying how to get it where the checkpoint's noise is not calibrated."""
+    if not noise_path(ckpt).is_file():
+        click.echo(f"navigation: calibrate the checkpoint's noise for the filtered and smoothed figures "
+                   f"(posenet calibrate --data DATASET --ckpt {ckpt})")  # fmt: skip
+        return
+    nav = navigate_split(data, split, ckpt, result.records, config)
+    if nav is None:
+        return
+    columns = {k: nav[k] for k in ("per_frame", "filtered", "smoothed")}
+    click.echo(format_table(["navigation", "per frame", "filtered", "smoothed"], navigation_table(columns)))
+    click.echo(NAVIGATION_LEGEND)
+    result.summary["navigation"] = nav
+
+
+@main.command()
+@click.option("--data", type=PATH, required=True, help="Dataset folder with a labelled split.")
+@click.option("--ckpt", type=PATH, required=True, help="Pose checkpoint; the noise is written beside it.")
+@click.option(
+    "--split", default=CALIBRATION_SPLIT, show_default=True, help="A split the network never trained on."
+)
+@click.option(
+    "--boxes", type=PATH, default=None, help="Stored detection boxes (BOP JSON); default: GT boxes."
+)
+@passes_option(PREDICT_PASSES, "predict's default, which the tracker's measurements use.")
+@click.option("--workers", type=click.IntRange(min=0), default=2, show_default=True, help="Loader processes.")
+def calibrate(data: Path, ckpt: Path, split: str, boxes: Path | None, passes: int, workers: int) -> None:
+    """Measure the pose network's noise on a labelled split, for the navigation filter: per band of the
+    network's confidence, the covariance of its rotation and translation errors (robust: turned poses and
+    lost boxes are the filter's gate's to reject). Writes CKPT's stem + .noise.json beside it, which
+    posenet predict --track and posenet eval read (docs/navigation.md)."""
+    load_checkpoint(ckpt, kind="pose")
+    out = noise_path(ckpt)
+    check_output(out, folder=False, overwrite=True)
+    model = calibrate_noise(data, ckpt, split, boxes, passes, workers)
+    click.echo(f"{model.images} posed images of split '{split}', {passes} pass(es):")
+    click.echo(model.table())
+    click.echo(f"wrote {write_output(out, model.to_json())}")
+
+
 @main.command()
 @click.option("--data", type=click.Path(path_type=Path), required=True, help="Dataset folder.")
 @click.option(
@@ -519,9 +586,20 @@ def viz(
 @click.option(
     "--track",
     is_flag=True,
-    help="Seed each frame's crop from the last pose; the detector runs to start and when the target is lost "
-    "(needs --detector; a sequence dataset's frames go in time order).",
+    help="Track on the navigation filter: each frame's crop seeded from the filter's predicted pose, its "
+    "pose the filter's measurement; the detector runs to start and when the target is lost. Records gain "
+    "the filtered and smoothed pose, velocity and angular velocity with their 1-sigma (needs --detector "
+    "and the checkpoint's noise from posenet calibrate; a sequence dataset's frames go in time order).",
 )
+@click.option(
+    "--dt",
+    "frame_dt",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="With --track: seconds between frames of SOURCE (default: a video's frame interval; a sequence "
+    "dataset's frames have their times).",
+)
+@filter_options
 @click.option(
     "--batch",
     type=click.IntRange(min=1),
@@ -553,6 +631,9 @@ def predict(
     min_score: float,
     passes: int,
     track: bool,
+    frame_dt: float | None,
+    accel_noise: float,
+    angular_accel_noise: float,
     batch: int,
     cuda_graphs: bool,
     bf16: bool,
@@ -567,8 +648,10 @@ def predict(
         raise PosenetError("--track seeds each frame from the one before: it takes no --batch")
     if (cuda_graphs or bf16) and batch == 1:
         raise PosenetError("--cuda-graphs and --bf16 go with --batch N (N > 1)")
+    nav_config = replace(NavConfig(), accel_noise=accel_noise, angular_accel_noise=angular_accel_noise)
     inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
-                            preset_intrinsics, onnx_path, min_score, passes, track)  # fmt: skip
+                            preset_intrinsics, onnx_path, min_score, passes, track, frame_dt,
+                            nav_config)  # fmt: skip
     batched = None
     if batch > 1:
         batched = BatchPredictor(inputs.predictor, batch, detector, graphs=cuda_graphs, bf16=bf16)
@@ -577,14 +660,17 @@ def predict(
         run = run_predict(inputs.predictor, inputs.frames, inputs.total, out, inputs.camera, inputs.box_for,
                           vis=not no_vis, formats=formats, video_fps=inputs.video_fps, progress=bar.update,
                           warn=tqdm.write, tracker=inputs.tracker, sequence_of=inputs.sequence_of,
-                          batched=batched)  # fmt: skip
+                          batched=batched, frame_dt=inputs.frame_dt)  # fmt: skip
     if batched is not None:
         batched.close()
     posed = sum(r.get("R") is not None for r in run.records)
     click.echo(f"{len(run.records)} inputs, {posed} poses, {run.failed} failed, "
                f"{len(run.records) / max(run.seconds, 1e-9):.1f} images/s")  # fmt: skip
     if inputs.tracker is not None:
-        click.echo(f"tracking: the detector ran on {inputs.tracker.detections} of {len(run.records)} inputs")
+        filtered = [r["filter"] for r in run.records if r.get("filter") is not None]
+        click.echo(f"tracking: the detector ran on {inputs.tracker.detections} of {len(run.records)} inputs; "
+                   f"the filter posed {len(filtered)}, coasted on {sum(f['coasting'] for f in filtered)}, "
+                   f"rejected a measurement's part on {sum(f['rejected'] for f in filtered)}")  # fmt: skip
     stages = inputs.predictor.timings.per_image_ms(len(run.records))
     click.echo("latency per image (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
     for path in run.files:

@@ -10,6 +10,7 @@ from functools import cache
 
 import numpy as np
 
+from posenet.navigation.estimate import state_from_camera
 from posenet.navigation.filter import CAMERA, CameraFrames, Measurement, NavState
 from posenet.navigation.so3 import exp
 from scgen.scenes.model import load_target
@@ -85,14 +86,8 @@ def measure(track: Track, k: int, rng: np.random.Generator, scale: float = 1.0) 
 
 def state_error(state: NavState, track: Track, k: int, frames: CameraFrames, c: np.ndarray) -> np.ndarray:
     """The true state minus the estimate, in the filter's error state (12,), at frame k: the truth taken
-    into the filter's frames (the centre of mass and its velocity in N, the attitude in A, the body rate
-    relative to A)."""
-    R_cm, t, v, w = track.R[k], track.t[k], track.velocity[k], track.omega[k]
-    Rc = R_cm @ c
-    p_c = t + Rc
-    v_c = v + np.cross(w, Rc) + np.cross(frames.w_cn, p_c)  # d/dt of the centre in N, camera axes
-    p, vel = frames.R_nc @ p_c, frames.R_nc @ v_c
-    R_ab = frames.R_ac @ R_cm
-    w_b = R_cm.T @ (w + frames.w_ca)
-    true = NavState(state.time, p, vel, R_ab, w_b, state.P)
+    into the filter's frames (posenet.navigation.estimate.state_from_camera)."""
+    true = state_from_camera(
+        state.time, track.R[k], track.t[k], track.velocity[k], track.omega[k], frames, c, state.P
+    )
     return true.minus(state)

@@ -23,10 +23,13 @@ from posenet.data.layout import scan_split
 from posenet.data.object_model import load_object_model
 from posenet.detection.detector import target_boxes
 from posenet.evaluation.evaluate import evaluate
-from posenet.predict.predictor import Pose, Predictor, Timings
+from posenet.navigation.estimate import state_from_camera
+from posenet.navigation.noise import NoiseModel
+from posenet.navigation.scene import sequence_frames
+from posenet.predict.predictor import Predictor, Timings
 from posenet.predict.recrop import box_iou, in_view, projected_box
 from posenet.predict.sources import dataset_frames, load_frame
-from posenet.predict.track import DETECTOR, TRACK, Tracker
+from posenet.predict.track import DETECTOR, NONE, POSE, SEARCH_EVERY, TRACK, Tracker
 from scgen.io import read_sequence_frames
 from tests.posenet_helpers import tiny_pose_checkpoint
 from tests.test_posenet_predict import TINY_DETECTOR
@@ -156,32 +159,44 @@ def test_the_latency_of_a_stage_run_twice_an_image_is_both_runs(dataset_dir: Pat
 
 
 def test_a_tracked_sequence_keeps_its_target(sequence_dataset: Path, sequence_ckpt: Path):
-    """Along each rendered sequence, the box seeded from frame k's pose crops frame k + 1 around its
-    target: the true centre's projection lies inside the crop (the DZI square) and the seed box meets
-    the true one. The poses are the truth's (the tiny network has learned nothing); the tracker runs the
-    real network on the seed box, with no detector run."""
-    # one pass: the seed box is under test; the untrained network's re-crop would land anywhere
-    predictor = Predictor.load(sequence_ckpt, passes=1)
-    tracker = Tracker(predictor, min_confidence=0.0)
+    """Along each rendered sequence, the filter started at frame k's labelled state (pose, velocity and
+    angular velocity; the chaser's own state from metadata.csv) predicts frame k + 1, and the crop seeded
+    there is the model's box at that prediction: HCW and Euler's equations are the dynamics scgen
+    rendered with, so it is the true box to EDGE_PX (never inside it) and the true centre lies in the crop.
+    The tracker then runs the real network on that box, with no detector run."""
+    predictor = Predictor.load(sequence_ckpt, passes=1)  # one pass: the seed box is under test
+    wide = np.diag([np.radians(10.0) ** 2] * 3).tolist(), np.diag([0.05**2] * 3).tolist()
+    tracker = Tracker(predictor, NoiseModel([0.0], [wide[0]], [wide[1]], [0.0], 0, {}), min_confidence=0.0)
     frames = {f.key: f for f in dataset_frames(sequence_dataset, "test", 1)}
     truth = {i.key: i for i in _instances(sequence_dataset)}
     order = read_sequence_frames(sequence_dataset)
     keys = sorted(frames, key=lambda k: (order[k].sequence_id, order[k].frame))
-    assert len(keys) >= 2
-    for before, key in zip(keys, keys[1:], strict=False):
-        if order[before].sequence_id != order[key].sequence_id:
-            continue
-        was, now = truth[before], truth[key]
-        tracker.previous = Pose(was.R, was.t, None, 1.0, 1.0)
+    pairs = [
+        (a, b) for a, b in zip(keys, keys[1:], strict=False) if order[a].sequence_id == order[b].sequence_id
+    ]
+    assert len(pairs) >= 2
+    for before, key in pairs:
+        was, now, seq = truth[before], truth[key], order[before]
+        assert seq.camera_attitude is not None  # the filter runs in LVLH on the chaser's own state
+        tracker.reset(seq)
+        motion = np.array(seq.velocity), np.array(seq.angular_velocity)
+        start = state_from_camera(seq.time_s, was.R, was.t, *motion, sequence_frames(seq),
+                                  tracker.body.centre_of_mass, 1e-12 * np.eye(12))  # fmt: skip
+        tracker.filter.start_from(start, sequence_frames(seq))
         frame = load_frame(frames[key])
-        seed = tracker.seed(frame.camera, now.image_size)
-        assert seed is not None and box_iou(seed, now.bbox_obj) > 0
+        at = (order[key].time_s, sequence_frames(order[key]))
+        seed, source = tracker.seed(*at, frame.camera.for_image(now.image_size))
+        assert source == TRACK and seed is not None
+        x, y, w, h = now.bbox_obj
+        excess = np.array([x - seed[0], y - seed[1], seed[0] + seed[2] - x - w, seed[1] + seed[3] - y - h])
+        assert excess.min() >= -1e-6 and excess.max() <= EDGE_PX, (key, seed, now.bbox_obj)
         roi = roi_from_box(seed, now.image_size, predictor.pad_scale)
         centre = project(np.zeros((1, 3)), now.R, now.t, _camera(now))[0]
         assert np.all(np.abs(centre - roi.center) <= roi.scale / 2), (key, centre, roi)
-        pose, source = tracker(frame.image, frame.camera)
+        tracked = tracker(frame.image, frame.camera, *at)
         # the given box comes back as its own floats (Predictor: user_crops[0])
-        assert source == TRACK and pose.box == seed and tracker.detections == 0
+        assert tracked.source == TRACK and tracked.pose.box == seed and tracker.detections == 0
+        assert tracked.estimate is not None and tracked.step.prior is not None
 
 
 def _invoke(*args: object) -> str:
@@ -200,17 +215,37 @@ def test_predict_track_on_a_sequence_dataset(
     (root / "tiny.yaml").write_text(TINY_DETECTOR)
     data = ["--data", sequence_dataset]
     _invoke("train-detector", *data, "--out", root / "det", "--config", root / "tiny.yaml", "--max-steps", 1)
-    output = _invoke("predict", *data, "--ckpt", sequence_ckpt, "--detector", root / "det" / "last.pt",
-                     "--track", "--min-score", 0, "--out", root / "pred")  # fmt: skip
+    track = ("predict", *data, "--ckpt", sequence_ckpt, "--detector", root / "det" / "last.pt", "--track",
+             "--min-score", 0, "--out", root / "pred")  # fmt: skip
+    refused = CliRunner().invoke(main, [str(a) for a in track])
+    assert refused.exit_code != 0 and "posenet calibrate" in refused.output and not (root / "pred").exists()
+    _invoke("calibrate", *data, "--ckpt", sequence_ckpt, "--split", "train")
+    output = _invoke(*track)
     records = [json.loads(line) for line in (root / "pred" / "predictions.jsonl").read_text().splitlines()]
     order = read_sequence_frames(sequence_dataset)
     seen = [order[r["scene_id"], r["im_id"]] for r in records]
     assert [(r["sequence_id"], r["frame"], r["time_s"]) for r in records] == sorted(
         (s.sequence_id, s.frame, s.time_s) for s in seen
     )
-    assert all(r["box_source"] in (TRACK, DETECTOR) for r in records)
+    assert all(r["box_source"] in (TRACK, POSE, DETECTOR, NONE) for r in records)
+    for i, r in enumerate(records):  # no pose between searches only after one that found nothing
+        if r["box_source"] == NONE:
+            searched = [p for p in records[max(0, i - SEARCH_EVERY) : i] if p["box_source"] == DETECTOR]
+            assert searched and "no_detection" in searched[-1]["flags"]
     firsts = [r for i, r in enumerate(records) if i == 0 or records[i - 1]["sequence_id"] != r["sequence_id"]]
-    assert all(r["box_source"] == DETECTOR for r in firsts)
+    assert all(r["box_source"] == DETECTOR and r["filter"] is None for r in firsts)
+    # the filter starts at a sequence's second frame (two measurements that agree: the untrained network's
+    # noise, calibrated, is wide enough for any two) and the smoother covers what it filtered
+    for r in records:
+        assert (r["filter"] is None) == (r["smoothed"] is None)
+        if r["filter"] is not None:
+            for key in ("t", "velocity", "omega"):
+                assert (
+                    len(r["filter"][key]) == 3
+                    and len(r["filter"]["sigma"][key if key == "t" or key == "velocity" else "omega_deg"])
+                    == 3
+                )
+            assert {"coasting", "rejected", "twin", "nis"} <= set(r["filter"])
     ran = sum(r["box_source"] == DETECTOR for r in records)
     assert f"the detector ran on {ran} of {len(records)} inputs" in output
     for sequence_id in {r["sequence_id"] for r in records}:

@@ -155,3 +155,45 @@ def test_eval_on_a_sequence_split_reports_each_sequence(
             f["jitter_t_m"] > 100 * f["jitter_t_m_truth"]
             and f["jitter_rot_deg"] > 100 * f["jitter_rot_deg_truth"]
         )
+
+
+def test_eval_on_a_sequence_split_filters_and_smooths(
+    sequence_dataset: Path, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
+):
+    """Without the checkpoint's calibrated noise, eval says how to get the navigation figures; with it
+    (posenet calibrate on the test split), the per-frame, filtered and smoothed columns over every frame
+    of the evaluated split: the smoother poses exactly the frames the filter does (it runs over the
+    filter's own steps), the filter none before a sequence's second frame (it starts from two measurements
+    that agree), and only the filter and the smoother give a covariance to check the truth against."""
+    ckpt = tiny_pose_checkpoint(sequence_dataset, tmp_path_factory)
+    noise = ckpt.with_name(ckpt.stem + ".noise.json")
+    noise.unlink(missing_ok=True)
+    out = tmp_path / "eval.json"
+    args = [
+        "eval",
+        "--data",
+        sequence_dataset,
+        "--ckpt",
+        ckpt,
+        "--split",
+        "train",
+        "--workers",
+        0,
+        "--json",
+        out,
+    ]
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    assert res.exit_code == 0 and "posenet calibrate --data DATASET" in res.output, res.output
+    calibrate = ["calibrate", "--data", sequence_dataset, "--ckpt", ckpt, "--split", "test", "--workers", 0]
+    calibrated = CliRunner().invoke(main, [str(a) for a in calibrate])
+    assert calibrated.exit_code == 0 and noise.is_file(), calibrated.output
+    res = CliRunner().invoke(main, [str(a) for a in [*args[:-2], "--json", tmp_path / "nav.json"]])
+    assert res.exit_code == 0, res.output
+    assert any(line.startswith("navigation ") and "filtered" in line for line in res.output.splitlines())
+    nav = json.loads((tmp_path / "nav.json").read_text())["navigation"]
+    frames = SEQUENCE["frames"] * 2  # the train split's two sequences
+    assert {nav[c]["frames"] for c in ("per_frame", "filtered", "smoothed")} == {frames}
+    assert nav["per_frame"]["posed"] == frames
+    assert 0 < nav["filtered"]["posed"] == nav["smoothed"]["posed"] <= frames - 2
+    assert nav["per_frame"]["in_3sigma_t"] is None and nav["filtered"]["in_3sigma_t"] is not None
+    assert nav["noise"]["split"] == "test"

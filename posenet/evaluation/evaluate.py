@@ -34,6 +34,7 @@ from posenet.evaluation.metrics import TURNED_DEG, headline_add, sample_errors, 
 from posenet.export.bench import dummy_inputs, measure_latency_ms
 from posenet.geometry import decode_pose
 from posenet.models import PoseNet
+from posenet.predict.confidence import batch_confidences
 from posenet.predict.ransac import PNP_LABELS, ransac_poses
 from posenet.predict.recrop import box_iou, projected_box
 
@@ -95,9 +96,9 @@ def predict(
     mask_type: str = "bce",
 ) -> dict[str, Predictions]:
     """Per PnP method (`patch`: the network's own pose; `ransac`: posenet.predict.ransac on its
-    correspondences,
-    reading its mask channel as `mask_type` trained it), records in loader order (scene_id, im_id, obj_id,
-    R row-major, t in metres, time_s, each error of metrics.sample_errors) and each error's list over
+    correspondences, reading its mask channel as `mask_type` trained it), records in loader order
+    (scene_id, im_id, obj_id, R row-major, t in metres, the pose's confidence as predict gives it
+    (posenet.predict.confidence), time_s, each error of metrics.sample_errors) and each error's list over
     them, for metrics.summarise. A RoI PnP-RANSAC cannot solve is a failure: no pose, infinite errors,
     `pnp_failed` true.
 
@@ -122,6 +123,8 @@ def predict(
                 (R, t), solved = decode_pose(out, b), torch.ones(len(out["rot6d"]), dtype=torch.bool)
             sync()
             share = (forward + time.perf_counter() - tic) / len(R)
+            cameras = [make_camera(K) for K in b["K"].double().cpu().numpy()]
+            confidence = batch_confidences(out, b, R, t, obj.extent, mask_type, cameras)
             errs = sample_errors(R, t, b["R"], b["t"], *geometry)
             errs = {k: v.masked_fill(~solved.to(v.device), math.inf).tolist() for k, v in errs.items()}
             for k, v in errs.items():
@@ -132,11 +135,13 @@ def predict(
                 R.flatten(1).tolist(),
                 t.tolist(),
                 solved.tolist(),
+                confidence,
                 per_instance,
                 strict=True,
             )
-            for (s, i), R_i, t_i, ok, e in rows:
-                pose = {"R": R_i, "t": t_i} if ok else {"R": None, "t": None, "pnp_failed": True}
+            for (s, i), R_i, t_i, ok, c, e in rows:
+                failed = {"R": None, "t": None, "pnp_failed": True}
+                pose = {"R": R_i, "t": t_i, "confidence": c} if ok else failed
                 records.append(
                     {"scene_id": s, "im_id": i, "obj_id": obj.obj_id, **pose, "time_s": share, **e}
                 )

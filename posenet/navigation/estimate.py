@@ -71,3 +71,23 @@ def camera_estimate(state: NavState, frames: CameraFrames, centre_of_mass: np.nd
         J[OMEGA, i] = (hi[3] - lo[3]) / (2 * STEP)
     cov = J @ state.P @ J.T
     return Estimate(state.time, R, t, velocity, w, 0.5 * (cov + cov.T))
+
+
+def state_from_camera(
+    time: float,
+    R: np.ndarray,
+    t: np.ndarray,
+    velocity: np.ndarray,
+    omega: np.ndarray,
+    frames: CameraFrames,
+    centre_of_mass: np.ndarray,
+    P: np.ndarray,
+) -> NavState:
+    """The filter state whose camera-frame outputs are (R, t, velocity, omega): the inverse of
+    `camera_estimate`, for a track started from a known state (PoseFilter.start_from), with covariance P
+    (the error state's)."""
+    Rc = R @ np.asarray(centre_of_mass, np.float64)
+    p_c = t + Rc
+    v_c = velocity + np.cross(omega, Rc) + np.cross(frames.w_cn, p_c)
+    w_b = R.T @ (omega + frames.w_ca)
+    return NavState(float(time), frames.R_nc @ p_c, frames.R_nc @ v_c, frames.R_ac @ R, w_b, P)

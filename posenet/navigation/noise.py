@@ -30,6 +30,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from posenet.errors import PosenetError
+from posenet.navigation.filter import Measurement
 
 BANDS = 4  # confidence bands of equal count
 TRIM_PROB = 0.997  # errors beyond this chi-square (3 dof) quantile are outliers to the covariance
@@ -42,6 +43,17 @@ FORMAT = "posenet measurement noise v1"
 def noise_path(ckpt: Path) -> Path:
     """Where a checkpoint's calibrated noise lives: beside it, `last.pt` -> `last.noise.json`."""
     return Path(ckpt).with_name(Path(ckpt).stem + NOISE_SUFFIX)
+
+
+def require_noise(ckpt: Path) -> Path:
+    """The checkpoint's calibrated noise file, or one line saying how to make it."""
+    path = noise_path(ckpt)
+    if not path.is_file():
+        raise PosenetError(
+            f"{ckpt} has no calibrated measurement noise ({path.name} beside it), which the navigation "
+            f"filter needs: run posenet calibrate --data DATASET --ckpt {ckpt}"
+        )
+    return path
 
 
 def robust_covariance(x: np.ndarray, prob: float = TRIM_PROB) -> tuple[np.ndarray, float]:
@@ -147,3 +159,9 @@ def calibrate(
         cov_t.append(c_t.tolist())
         outliers.append(max(out_rot, out_t))
     return NoiseModel(edges, cov_rot, cov_t, outliers, n, source)
+
+
+def measurement(R: np.ndarray, t: np.ndarray, confidence: float, noise: NoiseModel) -> Measurement:
+    """A pose (camera from model, t in metres) with its confidence's calibrated covariance."""
+    cov_rot, cov_t = noise.covariances(confidence, t)
+    return Measurement(np.asarray(R, np.float64), np.asarray(t, np.float64), cov_rot, cov_t)

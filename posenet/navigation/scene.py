@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from posenet.navigation.filter import CAMERA, CameraFrames
+from posenet.navigation.filter import CAMERA, CameraFrames, NavConfig, PoseFilter
 from scgen.io import ScgenError, SequenceFrame
 from scgen.scenes.motion.orbit import R_EARTH, lvlh_to_inertial, mean_motion
 from scgen.scenes.motion.tumble import mass_properties, quats_to_matrices
@@ -63,3 +63,17 @@ def sequence_frames(frame: SequenceFrame | None) -> CameraFrames:
     w_ca = w_cn + R_lc.T @ np.array([0.0, 0.0, n])  # LVLH turns in I at n about its z
     accel = -np.asarray(frame.thrust if frame.thrust is not None else (0.0, 0.0, 0.0))
     return CameraFrames(R_lc, R_ic, w_cn, w_ca, accel)
+
+
+def make_filter(
+    body: TargetBody,
+    diameter: float,
+    symmetries: np.ndarray | None,
+    first: SequenceFrame | None,
+    config: NavConfig | None = None,
+) -> PoseFilter:
+    """A filter for a target: in LVLH with HCW and torque-free attitude where the sequence's first frame
+    gives the chaser's state (orbit_rate), else in the camera frame at constant velocity and rate."""
+    n = None if first is None else orbit_rate(first)
+    inertia = body.inertia if n is not None else None
+    return PoseFilter.for_motion(body.centre_of_mass, diameter, symmetries, n, inertia, config)

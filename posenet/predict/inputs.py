@@ -13,6 +13,8 @@ import torch
 from posenet.data.boxes import read_boxes, read_misses
 from posenet.data.camera import Camera, make_camera, parse_inline, read_camera_file
 from posenet.errors import PosenetError
+from posenet.navigation.filter import NavConfig
+from posenet.navigation.noise import NoiseModel, require_noise
 from posenet.predict.predictor import Box, Predictor
 from posenet.predict.recrop import PREDICT_PASSES
 from posenet.predict.run import MISS
@@ -34,6 +36,7 @@ class PredictInputs:
     video_fps: float = 0.0
     tracker: Tracker | None = None  # --track
     sequences: dict[tuple[int, int], SequenceFrame] | None = None  # a sequence dataset's frames
+    frame_dt: float | None = None  # --track outside a sequence dataset: the seconds between frames
 
     def sequence_of(self, frame: Frame) -> SequenceFrame | None:
         """A dataset frame's sequence, frame number and time; None outside a sequence dataset."""
@@ -80,9 +83,13 @@ def predict_inputs(
     min_score: float | None = None,
     passes: int = PREDICT_PASSES,
     track: bool = False,
+    frame_dt: float | None = None,
+    nav_config: NavConfig | None = None,
 ) -> PredictInputs:
     """The checked inputs of one predict run (nothing is written here). A sequence dataset's frames come
-    in time order, sequence by sequence (what `track` and the per-sequence overlay videos need)."""
+    in time order, sequence by sequence (what `track` and the per-sequence overlay videos need). With
+    `track`, the checkpoint's calibrated noise is read (posenet calibrate) and each frame's time is its
+    sequence's, else its index times `frame_dt` (default: a video's own frame interval)."""
     if (source is None) == (data is None):
         raise PosenetError("give SOURCE (an image, folder, glob or video) or --data DIR, not both or neither")
     if box is not None and boxes is not None:
@@ -94,6 +101,7 @@ def predict_inputs(
         raise PosenetError("--track seeds each frame from the last pose and finds the target with the "
                            "detector: give --detector, and neither --box nor --boxes")  # fmt: skip
     fixed_box = parse_box(box) if box is not None else None
+    noise = NoiseModel.load(require_noise(ckpt)) if track else None
     predictor = Predictor.load(ckpt, detector, device, data, onnx, min_score, passes)
     sequences = read_sequence_frames(data) if data is not None else {}
     obj_id = predictor.obj.obj_id
@@ -125,8 +133,16 @@ def predict_inputs(
             return frame.box
         return None
 
-    tracker = Tracker(predictor) if track else None
-    return PredictInputs(predictor, stream, total, user, box_for, fps, tracker, sequences)
+    tracker = None
+    if track:
+        assert noise is not None
+        if not sequences:
+            frame_dt = frame_dt or (1.0 / fps if fps > 0 else None)
+            if frame_dt is None:
+                raise PosenetError("--track needs each frame's time: give --dt SECONDS between frames "
+                                   "(a video has its rate, a sequence dataset its times)")  # fmt: skip
+        tracker = Tracker(predictor, noise, nav_config)
+    return PredictInputs(predictor, stream, total, user, box_for, fps, tracker, sequences, frame_dt)
 
 
 def _read_box_file(path: Path, obj_id: int, keys: list[tuple[int, int]]) -> tuple[dict, set]:

@@ -26,11 +26,12 @@ import cv2
 import numpy as np
 
 from posenet.data.camera import Camera, CameraMismatch
+from posenet.navigation.scene import sequence_frames
 from posenet.predict.batch import BatchPredictor
 from posenet.predict.overlay import contact_sheet, draw_pose
 from posenet.predict.predictor import NO_DETECTION, Box, Pose, Predictor
 from posenet.predict.sources import Frame, load_frame
-from posenet.predict.track import Tracker
+from posenet.predict.track import Tracker, estimate_json
 from scgen.io import SequenceFrame, atomic_write_bytes, atomic_write_text, bop
 
 FORMATS = ("bop", "speedplus")
@@ -72,13 +73,16 @@ def run_predict(
     tracker: Tracker | None = None,
     sequence_of: Callable[[Frame], SequenceFrame | None] = lambda frame: None,
     batched: BatchPredictor | None = None,
+    frame_dt: float | None = None,
 ) -> PredictRun:
     """Predict every frame (a dataset frame brings its camera, else `camera`), writing into `out` (made
     by the caller). `box_for(frame, index)` gives a frame's box, None for the detector's, MISS for none.
-    With a `tracker`, a frame without a given box is seeded from the last pose (posenet.predict.track),
-    restarted where `sequence_of` (a frame's sequence, frame number and time; None outside a sequence
-    dataset) says a new sequence begins; each record then names its box_source. With `batched` (not with
-    a tracker), frames are loaded in its thread pool and predicted `batched.size` at a time (_batches)."""
+    With a `tracker`, each frame goes through the navigation filter (posenet.predict.track) at its time (its
+    sequence's, from `sequence_of`: a frame's sequence, frame number and time, None outside a sequence
+    dataset; else its index times `frame_dt`), restarted where a new sequence begins; each record then
+    names its box_source and holds the filter's answer (`filter`) and, once its sequence has ended, the
+    smoother's (`smoothed`). With `batched` (not with a tracker), frames are loaded in its thread pool and
+    predicted `batched.size` at a time (_batches)."""
     run, tic = PredictRun(), time.perf_counter()
     sheet_every = max(1, total // SHEET_TILES)
     sheet: list[np.ndarray] = []
@@ -89,6 +93,7 @@ def run_predict(
     noted: set[str] = set()
     stream = iter(frames) if batched is None else _batches(frames, batched, camera, box_for)
     sequence: int | None = None  # the sequence of the frame before
+    tracked: list[dict[str, Any]] = []  # the records of the current track, for its smoother
     for index in itertools.count():
         before = {s: len(v) for s, v in predictor.timings.ms.items()}
         t0 = time.perf_counter()  # a file or video frame is decoded by the stream, a dataset's by load_frame
@@ -108,8 +113,11 @@ def run_predict(
         if seq is not None:
             base |= {"sequence_id": seq.sequence_id, "frame": seq.frame, "time_s": seq.time_s}
             if tracker is not None and seq.sequence_id != sequence:
-                tracker.reset()
+                _attach_smoothed(tracked, tracker)
+                tracker.reset(seq)
             sequence = seq.sequence_id
+        elif tracker is not None:
+            base["time_s"] = index * (frame_dt or 0.0)
         cam, error = _camera_for(frame, camera)
         if error is not None:
             run.failed += 1
@@ -126,8 +134,10 @@ def run_predict(
             elif ready is not None:
                 pose = ready
             elif tracker is not None:
-                pose, source = tracker(frame.image, cam, box)  # type: ignore[arg-type]
-                base["box_source"] = source
+                frames = sequence_frames(seq)
+                step = tracker(frame.image, cam, base["time_s"], frames, box)  # type: ignore[arg-type]
+                pose = step.pose if step.pose is not None else NO_DETECTION
+                base |= {"box_source": step.source, **step.to_json()}
             else:
                 pose = predictor(frame.image, cam, box)  # type: ignore[arg-type]
             if vis:
@@ -151,8 +161,12 @@ def run_predict(
             }
             time_ms = (shares or {}) | time_ms
             run.records.append({**base, **pose.to_json(), "obj_id": predictor.obj.obj_id, "time_ms": time_ms})
+            if tracker is not None:
+                tracked.append(run.records[-1])
         if progress is not None:
             progress(1)
+    if tracker is not None:
+        _attach_smoothed(tracked, tracker)
     if writer is not None:
         writer.release()
         run.files.append(out / "overlay.mp4")
@@ -160,6 +174,14 @@ def run_predict(
     run.seconds = time.perf_counter() - tic
     _write_outputs(run, out, formats, sheet)
     return run
+
+
+def _attach_smoothed(records: list[dict[str, Any]], tracker: Tracker) -> None:
+    """Give the records of the track just ended (each frame that went through the filter) the
+    smoother's estimate, and start a new list."""
+    for record, estimate in zip(records, tracker.smoothed(), strict=True):
+        record["smoothed"] = None if estimate is None else estimate_json(estimate)
+    records.clear()
 
 
 def _batches(
