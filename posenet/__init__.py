@@ -2,7 +2,8 @@
 
 The Python API, loaded on first use (so that `import posenet` stays light): `posenet.train` (a run, as
 `posenet train`), `posenet.evaluate` (a checkpoint on a split, as `posenet eval`), `posenet.Predictor`
-and `posenet.Pose` (a pose from any image, as `posenet predict`), `posenet.make_camera`.
+and `posenet.Pose` (a pose from any image, as `posenet predict`), `posenet.Tracker` (a video or sequence
+on the navigation filter, as `posenet predict --track`), `posenet.make_camera`.
 
 OpenMP's idle threads spin briefly, then sleep (GOMP_SPINCOUNT=1000, about 10 us, unless the environment
 sets GOMP_SPINCOUNT or OMP_WAIT_POLICY). libgomp's default spins 300,000 times at every barrier, and on a
@@ -30,6 +31,7 @@ API = {
     "evaluate": "posenet.evaluation.evaluate",
     "Predictor": "posenet.predict.predictor",
     "Pose": "posenet.predict.predictor",
+    "Tracker": "posenet.predict.track",
     "make_camera": "posenet.data.camera",
 }
 __all__ = list(API)

@@ -48,6 +48,7 @@ POSENET_FACADE = {
     "posenet.evaluate": "posenet.evaluation.evaluate",
     "posenet.Predictor": "posenet.predict.predictor",
     "posenet.Pose": "posenet.predict.predictor",
+    "posenet.Tracker": "posenet.predict.track",
     "posenet.make_camera": "posenet.data.camera",
 }
 LAZY = {

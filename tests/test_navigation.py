@@ -150,17 +150,20 @@ def test_coasting_bounds_the_error_by_its_covariance_through_a_gap() -> None:
 
 
 def test_the_camera_estimate_carries_the_states_covariance() -> None:
-    """The pose, velocity and angular velocity a user reads (camera axes, as scgen labels them) are the
-    truth to within their 3-sigma ellipsoids, each block apart, at every frame after the start."""
+    """The pose, velocity and angular velocity a user reads (camera axes, as scgen labels them) lie within
+    their 3-sigma ellipsoids, each block apart, on at least 99 % of the (run, frame, block) checks after
+    the start (0.27 % expected outside)."""
     sc = scenario("corridor_approach", "spin")
-    f = run(sc, np.random.default_rng(3))
     c = body().centre_of_mass
-    for k in range(2, 60):
-        e = camera_estimate(f.history[k].posterior, sc.frames[k], c)
-        errors = [(T, sc.track.t[k] - e.t), (ROT, log(sc.track.R[k] @ e.R.T)),
-                  (VEL, sc.track.velocity[k] - e.velocity), (OMEGA, sc.track.omega[k] - e.omega)]  # fmt: skip
-        for block, error in errors:
-            assert e.nees(block, error) <= THREE_SIGMA[3], (k, block)
+    inside = []
+    for r in range(RUNS):
+        f = run(sc, np.random.default_rng(r))
+        for k in range(1, 60):
+            e = camera_estimate(f.history[k].posterior, sc.frames[k], c)
+            errors = [(T, sc.track.t[k] - e.t), (ROT, log(sc.track.R[k] @ e.R.T)),
+                      (VEL, sc.track.velocity[k] - e.velocity), (OMEGA, sc.track.omega[k] - e.omega)]  # fmt: skip
+            inside += [e.nees(block, error) <= THREE_SIGMA[3] for block, error in errors]
+    assert np.mean(inside) >= 0.99
 
 
 def test_smoothing_improves_on_filtering() -> None:

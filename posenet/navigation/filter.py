@@ -17,7 +17,9 @@ frame), R_m = R_CA R exp(noise). Each frame:
   twin of the measurement that best fits the prediction is the one used (`twin` flag);
 - update with the accepted parts (Joseph form), fold the attitude correction into R and reset;
 - start, and after `reinit_after` rejections in a row restart a part, only from two measurements that
-  agree with each other (an eclipse's or a lost detector's answers jump; a true change of lock holds).
+  agree with each other (an eclipse's or a lost detector's answers jump; a true change of lock holds):
+  the start is at the first of the two, updated with the second, so online the first frame has no
+  estimate and the smoother's trajectory begins there.
 
 Every step is kept (`history`) for the fixed-interval smoother (posenet.navigation.smoother). Pure numpy.
 """
@@ -152,7 +154,8 @@ class PoseFilter:
         self.gate = float(chi2.ppf(self.config.gate_prob, 3))
         self.state: NavState | None = None
         self.history: list[Step] = []
-        self._candidate: tuple[float, CameraFrames, Measurement] | None = None  # the start's first half
+        # the start's first half: a measurement, its frame's time and frames, and its step's index in history
+        self._candidate: tuple[float, CameraFrames, Measurement, int] | None = None
         self._rejections = {"rot": 0, "t": 0}
         self._rejected: dict[str, tuple[float, CameraFrames, Measurement] | None] = {"rot": None, "t": None}
 
@@ -318,17 +321,25 @@ class PoseFilter:
         return False
 
     def _start(self, time: float, frames: CameraFrames, m: Measurement | None) -> Step:
-        """Before the start: keep a measurement; start at the second of two that agree."""
+        """Before the start: keep a measurement; on one that agrees with the one kept, start at the kept
+        one's frame (its step, already in `history`, gets that state: the smoother sees it, the online
+        estimate of that frame stays none) and update with this one as any frame after the start."""
         step = Step(time, frames, None, None, None, measured=m is not None)
         if m is None:
             return step
         here = (time, frames, m)
-        if self._candidate is not None and self.agree(self._candidate, here):
-            self.state = self._initial_state(time, frames, m)
-            self._candidate = None
-            return replace(step, posterior=self.state, accepted_rot=True, accepted_t=True, restarted=True)
-        self._candidate = here
-        return step
+        kept, self._candidate = self._candidate, None
+        if kept is None or not self.agree(kept[:3], here):
+            self._candidate = (*here, len(self.history))
+            return step
+        t0, f0, m0, index = kept
+        self.state = self._initial_state(t0, f0, m0)
+        self.history[index] = replace(self.history[index], posterior=self.state, accepted_rot=True,
+                                      accepted_t=True, restarted=True)  # fmt: skip
+        predicted = self.predict(time, frames)
+        assert predicted is not None
+        prior, phi = predicted
+        return self._update(Step(time, frames, prior, phi, prior), m)
 
     def _restart_if_locked(self, step: Step, m: Measurement) -> Step:
         """After `reinit_after` rejections of a part in a row, restart that part from the measurement
