@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.linalg import expm
@@ -74,12 +75,16 @@ class AttitudeModel:
     inertia: np.ndarray | None
     accel_psd: float
 
+    @cached_property
+    def inverse_inertia(self) -> np.ndarray | None:
+        return None if self.inertia is None else np.linalg.inv(self.inertia)
+
     def rate_jacobian(self, w: np.ndarray) -> np.ndarray:
         """d(w')/dw of Euler's equations at w (zero at constant rate)."""
-        if self.inertia is None:
+        if self.inertia is None or self.inverse_inertia is None:
             return np.zeros((3, 3))
         J = self.inertia
-        return np.linalg.solve(J, skew(J @ w) - skew(w) @ J)
+        return self.inverse_inertia @ (skew(J @ w) - skew(w) @ J)
 
     def step(
         self, R: np.ndarray, w: np.ndarray, dt: float
@@ -87,28 +92,28 @@ class AttitudeModel:
         """(R', w', Phi, Q) over dt: the nominal attitude and rate after dt (exact at constant rate; RK4 on
         Euler's equations in sub-steps of at most MAX_TURN_RAD otherwise, the attitude turned by each
         sub-step's mean rate: the midpoint rule, whose global error over T is at most T h^2 / 12 times
-        max |w x w'|, h a sub-step), the error-state transition (6x6, [a; dw]) and the process noise."""
+        max |w x w'|, h a sub-step), the error-state transition (6x6, [a; dw]: the matrix exponential of
+        the error dynamics at the step's mean rate, which is all a covariance needs) and the process
+        noise."""
         w = np.asarray(w, np.float64)
-        phi = np.eye(6)
         if self.inertia is None:
-            F = np.zeros((6, 6))
-            F[:3, :3], F[:3, 3:] = -skew(w), np.eye(3)
-            phi = expm(F * dt)
             R_next, w_next = R @ exp(w * dt), w
         else:
+            J = self.inertia
             steps = max(1, math.ceil(np.linalg.norm(w) * abs(dt) / MAX_TURN_RAD))
             h, R_next, w_next = dt / steps, R, w
             for _ in range(steps):
-                F = np.zeros((6, 6))
-                F[:3, :3], F[:3, 3:], F[3:, 3:] = -skew(w_next), np.eye(3), self.rate_jacobian(w_next)
-                k1 = euler_rates(self.inertia, w_next)
-                k2 = euler_rates(self.inertia, w_next + 0.5 * h * k1)
-                k3 = euler_rates(self.inertia, w_next + 0.5 * h * k2)
-                k4 = euler_rates(self.inertia, w_next + h * k3)
+                k1 = euler_rates(J, w_next)
+                k2 = euler_rates(J, w_next + 0.5 * h * k1)
+                k3 = euler_rates(J, w_next + 0.5 * h * k2)
+                k4 = euler_rates(J, w_next + h * k3)
                 w_end = w_next + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
                 R_next = R_next @ exp(0.5 * h * (w_next + w_end))
-                phi = expm(F * h) @ phi
                 w_next = w_end
+        mean = 0.5 * (w + w_next)
+        F = np.zeros((6, 6))
+        F[:3, :3], F[:3, 3:], F[3:, 3:] = -skew(mean), np.eye(3), self.rate_jacobian(mean)
+        phi = expm(F * dt)
         return R_next, w_next, phi, white_acceleration_noise(self.accel_psd, dt)
 
 

@@ -8,9 +8,9 @@ w (rad/s, dR/dt = [w]x R). With the state's p, v (N), R_AB, w_B and the camera's
     R = R_CA R_AB,    t = R_CN p - R c,    w = R w_B - w_CA,
     dt/dt = R_CN v - w_CN x (R_CN p) - w x (R c)
 
-Their covariance is J P J^T, J the Jacobian of these outputs in the error state, by central differences
-(each output is smooth in it; a step of 1e-6 in SI units leaves ~1e-12 of truncation); the rotation's
-error is the rotation vector of R_true R^T, camera axes.
+Their covariance is J P J^T, J the Jacobian of these outputs in the error state (`output_jacobian`,
+worked out by hand and held to central differences in tests/test_navigation.py); the rotation's error is
+the rotation vector of R_true R^T, camera axes.
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from posenet.navigation.filter import DIM, CameraFrames, NavState
-from posenet.navigation.so3 import log
+from posenet.navigation.filter import ATT, DIM, POS, RATE, CameraFrames, NavState
+from posenet.navigation.filter import VEL as VEL_STATE
+from posenet.navigation.so3 import skew
 
-STEP = 1e-6  # the central differences' step, in the error state's SI units
 T, ROT, VEL, OMEGA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)  # blocks of Estimate.cov
 
 
@@ -46,31 +46,42 @@ class Estimate:
         return float(error @ np.linalg.solve(self.cov[block, block], error))
 
 
-def _outputs(state: NavState, frames: CameraFrames, c: np.ndarray) -> tuple[np.ndarray, ...]:
+def output_jacobian(state: NavState, frames: CameraFrames, c: np.ndarray) -> np.ndarray:
+    """d[t, rotation, velocity, w] / d[dp, dv, a, dw] at `state` (12x12): with R = R_CM, the rotation's
+    error in camera axes R a, Rc = R c, w = R w_B - w_CA and R exp(a) c ~ Rc - R [c]x a,
+
+        t:   R_CN dp + R [c]x a
+        rot: R a
+        w:   R dw - R [w_B]x a
+        v:   R_CN dv - [w_CN]x R_CN dp + [Rc]x dw_out - [w]x dRc
+    """
     R = frames.R_ac.T @ state.R
-    p_c = frames.R_nc.T @ state.p
+    R_cn = frames.R_nc.T
     Rc = R @ c
-    t = p_c - Rc
     w = R @ state.w - frames.w_ca
-    velocity = frames.R_nc.T @ state.v - np.cross(frames.w_cn, p_c) - np.cross(w, Rc)
-    return R, t, velocity, w
+    dw_da, dw_dw = -R @ skew(state.w), R
+    dRc_da = -R @ skew(c)
+    J = np.zeros((DIM, DIM))
+    J[T, POS], J[T, ATT] = R_cn, -dRc_da
+    J[ROT, ATT] = R
+    J[OMEGA, ATT], J[OMEGA, RATE] = dw_da, dw_dw
+    J[VEL, POS], J[VEL, VEL_STATE] = -skew(frames.w_cn) @ R_cn, R_cn
+    J[VEL, ATT] = skew(Rc) @ dw_da - skew(w) @ dRc_da
+    J[VEL, RATE] = skew(Rc) @ dw_dw
+    return J
 
 
 def camera_estimate(state: NavState, frames: CameraFrames, centre_of_mass: np.ndarray) -> Estimate:
-    """`state` in the camera frame of `frames`, with its covariance."""
+    """`state` in the camera frame of `frames`, with its covariance J P J^T (`output_jacobian`)."""
     c = np.asarray(centre_of_mass, np.float64)
-    R, t, velocity, w = _outputs(state, frames, c)
-    J = np.zeros((DIM, DIM))
-    for i in range(DIM):
-        dx = np.zeros(DIM)
-        dx[i] = STEP
-        hi, lo = _outputs(state.plus(dx), frames, c), _outputs(state.plus(-dx), frames, c)
-        J[T, i] = (hi[1] - lo[1]) / (2 * STEP)
-        J[ROT, i] = (log(hi[0] @ R.T) - log(lo[0] @ R.T)) / (2 * STEP)
-        J[VEL, i] = (hi[2] - lo[2]) / (2 * STEP)
-        J[OMEGA, i] = (hi[3] - lo[3]) / (2 * STEP)
+    R = frames.R_ac.T @ state.R
+    p_c = frames.R_nc.T @ state.p
+    Rc = R @ c
+    w = R @ state.w - frames.w_ca
+    velocity = frames.R_nc.T @ state.v - np.cross(frames.w_cn, p_c) - np.cross(w, Rc)
+    J = output_jacobian(state, frames, c)
     cov = J @ state.P @ J.T
-    return Estimate(state.time, R, t, velocity, w, 0.5 * (cov + cov.T))
+    return Estimate(state.time, R, p_c - Rc, velocity, w, 0.5 * (cov + cov.T))
 
 
 def state_from_camera(
