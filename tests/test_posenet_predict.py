@@ -19,6 +19,7 @@ import torch
 from click.testing import CliRunner
 from float_bounds import U32, forward_rel, gram_schmidt_gain, pose_checkpoint_rel, rotation_outputs
 
+import posenet
 from posenet.checkpoint import load_checkpoint, save_checkpoint
 from posenet.cli import main
 from posenet.data.camera import CameraMismatch, map_box, read_camera_file, resized, to_training_camera
@@ -628,3 +629,46 @@ def test_a_label_wider_than_its_image_goes_on_over_lines():
         rows = np.nonzero(image.any(axis=(1, 2)))[0]
         assert not image[:, -LABEL_MARGIN // 2 :].any(), text
         assert (lines - 1) * leading < rows.max() <= lines * leading + leading // 2, (text, rows.max())
+
+
+def test_track_a_users_video_on_the_filter(
+    dataset_dir: Path, user_folder: Path, pose_ckpt: Path, detector_ckpt: Path, tmp_path: Path
+):
+    """--track on a video (no orbit known: the filter at constant velocity and rate in the camera frame):
+    each frame's time is its index over the video's rate; a folder of images needs --dt, and takes it;
+    the Python API (posenet.Tracker) gives the CLI's filtered and smoothed states for the same frames."""
+    ckpt = tmp_path / "last.pt"  # a copy: the shared checkpoint stays read-only
+    shutil.copy(pose_ckpt, ckpt)
+    _invoke("calibrate", "--data", dataset_dir, "--ckpt", ckpt, "--split", "test", "--workers", 0)
+    images = sorted(user_folder.glob("frame*"))
+    _write_video(tmp_path / "clip.mp4", images)
+    common = ("--ckpt", ckpt, "--detector", detector_ckpt, "--camera", user_folder / "camera.json",
+              "--min-score", 0, "--track", "--no-vis")  # fmt: skip
+    _invoke("predict", tmp_path / "clip.mp4", *common, "--out", tmp_path / "video")
+    records = _lines(tmp_path / "video" / "predictions.jsonl")
+    assert [r["time_s"] for r in records] == [i * (1 / 10.0) for i in range(len(images))]  # 10 fps: index x dt
+    assert all("filter" in r and "smoothed" in r for r in records)
+    # the untrained network's noise, calibrated, is wide: any two detections agree and start the filter
+    assert records[0]["filter"] is None and all(r["filter"] is not None for r in records[1:])
+    assert "give --dt" in _invoke("predict", user_folder, *common, "--out", tmp_path / "folder", code=1)
+    assert not (tmp_path / "folder").exists()
+    _invoke("predict", user_folder, *common, "--dt", 2.5, "--out", tmp_path / "folder")
+    assert [r["time_s"] for r in _lines(tmp_path / "folder" / "predictions.jsonl")] == [
+        2.5 * i for i in range(len(images))
+    ]
+    tracker = posenet.Tracker.load(ckpt, detector=detector_ckpt, min_score=0.0)
+    camera = read_camera_file(user_folder / "camera.json")
+    cap = cv2.VideoCapture(str(tmp_path / "clip.mp4"))
+    for i, record in enumerate(records):
+        ok, image = cap.read()
+        tracked = tracker(image, camera, time=record["time_s"])
+        assert tracked.source == record["box_source"]
+        if tracked.estimate is None:
+            assert record["filter"] is None
+        else:  # the same floats through the same code: only JSON's round trip of repr'd floats
+            assert tracked.estimate.t.tolist() == record["filter"]["t"]
+    cap.release()
+    for estimate, record in zip(tracker.smoothed(), records, strict=True):
+        assert (estimate is None and record["smoothed"] is None) or estimate.t.tolist() == record["smoothed"][
+            "t"
+        ]

@@ -8,6 +8,7 @@ itself is a pure function of a pose, tested at the ground-truth poses of real re
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import cv2
@@ -215,11 +216,13 @@ def test_predict_track_on_a_sequence_dataset(
     (root / "tiny.yaml").write_text(TINY_DETECTOR)
     data = ["--data", sequence_dataset]
     _invoke("train-detector", *data, "--out", root / "det", "--config", root / "tiny.yaml", "--max-steps", 1)
-    track = ("predict", *data, "--ckpt", sequence_ckpt, "--detector", root / "det" / "last.pt", "--track",
+    ckpt = root / "last.pt"  # a copy: the shared checkpoint stays read-only, with no noise beside it
+    shutil.copy(sequence_ckpt, ckpt)
+    track = ("predict", *data, "--ckpt", ckpt, "--detector", root / "det" / "last.pt", "--track",
              "--min-score", 0, "--out", root / "pred")  # fmt: skip
     refused = CliRunner().invoke(main, [str(a) for a in track])
     assert refused.exit_code != 0 and "posenet calibrate" in refused.output and not (root / "pred").exists()
-    _invoke("calibrate", *data, "--ckpt", sequence_ckpt, "--split", "train")
+    _invoke("calibrate", *data, "--ckpt", ckpt, "--split", "train")
     output = _invoke(*track)
     records = [json.loads(line) for line in (root / "pred" / "predictions.jsonl").read_text().splitlines()]
     order = read_sequence_frames(sequence_dataset)

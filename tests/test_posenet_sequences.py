@@ -5,6 +5,7 @@ velocity and rate, the noise's known RMS for white noise) and end to end on a re
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -165,9 +166,9 @@ def test_eval_on_a_sequence_split_filters_and_smooths(
     of the evaluated split: the smoother poses exactly the frames the filter does (it runs over the
     filter's own steps), the filter none before a sequence's second frame (it starts from two measurements
     that agree), and only the filter and the smoother give a covariance to check the truth against."""
-    ckpt = tiny_pose_checkpoint(sequence_dataset, tmp_path_factory)
+    ckpt = tmp_path / "last.pt"  # a copy: the shared checkpoint stays read-only, with no noise beside it
+    shutil.copy(tiny_pose_checkpoint(sequence_dataset, tmp_path_factory), ckpt)
     noise = ckpt.with_name(ckpt.stem + ".noise.json")
-    noise.unlink(missing_ok=True)
     out = tmp_path / "eval.json"
     args = [
         "eval",
