@@ -42,6 +42,7 @@ from posenet.models import VARIANTS
 from posenet.navigation.filter import NavConfig
 from posenet.navigation.noise import noise_path
 from posenet.predict.batch import BatchPredictor
+from posenet.predict.confidence import LOW_CONFIDENCE
 from posenet.predict.inputs import predict_inputs
 from posenet.predict.ransac import PNP_LABELS, PNP_METHODS
 from posenet.predict.recrop import PREDICT_PASSES
@@ -481,17 +482,45 @@ def navigation_summary(data: Path, split: str, ckpt: Path, result: Any, config: 
     "--boxes", type=PATH, default=None, help="Stored detection boxes (BOP JSON); default: GT boxes."
 )
 @passes_option(PREDICT_PASSES, "predict's default, which the tracker's measurements use.")
+@click.option(
+    "--min-confidence",
+    type=click.FloatRange(0, 1),
+    default=LOW_CONFIDENCE,
+    show_default=True,
+    help="A pose under this confidence is no measurement to the filter (a dark frame's guess): neither "
+    "calibrated on nor used (the file keeps it).",
+)
+@click.option(
+    "--sequences",
+    type=PATH,
+    default=None,
+    help="A labelled sequence render (its --sequences-split): how much of the error persists from frame to "
+    "frame, and for how long [default: --data itself, where it is a sequence dataset; else none measured].",
+)
+@click.option("--sequences-split", default="test", show_default=True, help="The split of --sequences.")
 @click.option("--workers", type=click.IntRange(min=0), default=2, show_default=True, help="Loader processes.")
-def calibrate(data: Path, ckpt: Path, split: str, boxes: Path | None, passes: int, workers: int) -> None:
-    """Measure the pose network's noise on a labelled split, for the navigation filter: per band of the
-    network's confidence, the covariance of its rotation and translation errors (robust: turned poses and
-    lost boxes are the filter's gate's to reject). Writes CKPT's stem + .noise.json beside it, which
-    posenet predict --track and posenet eval read (docs/navigation.md)."""
+def calibrate(
+    data: Path,
+    ckpt: Path,
+    split: str,
+    boxes: Path | None,
+    passes: int,
+    min_confidence: float,
+    sequences: Path | None,
+    sequences_split: str,
+    workers: int,
+) -> None:
+    """Measure the pose network's noise on labelled images, for the navigation filter: per band of the
+    network's confidence, the covariance of its rotation and translation errors on --data's --split
+    (robust: turned poses and lost boxes are the filter's gate's to reject), and along labelled sequences
+    (--sequences) how much of an error persists from frame to frame and how long. Writes CKPT's stem +
+    .noise.json beside it, which posenet predict --track and posenet eval read (docs/navigation.md)."""
     load_checkpoint(ckpt, kind="pose")
     out = noise_path(ckpt)
     check_output(out, folder=False, overwrite=True)
-    model = calibrate_noise(data, ckpt, split, boxes, passes, workers)
-    click.echo(f"{model.images} posed images of split '{split}', {passes} pass(es):")
+    seq = (sequences, sequences_split) if sequences is not None else None
+    model = calibrate_noise(data, ckpt, split, boxes, passes, workers, min_confidence, seq)
+    click.echo(f"split '{split}' of {data}, {passes} pass(es):")
     click.echo(model.table())
     click.echo(f"wrote {write_output(out, model.to_json())}")
 
@@ -592,12 +621,20 @@ def viz(
     "and the checkpoint's noise from posenet calibrate; a sequence dataset's frames go in time order).",
 )
 @click.option(
+    "--filter",
+    "filtered",
+    is_flag=True,
+    help="Run the navigation filter over every frame's pose, boxed as without it (the detector on every "
+    "frame, or --box/--boxes): records gain the filtered and smoothed state; slower than --track, and its "
+    "crops stay independent of the filter's estimate (docs/navigation.md).",
+)
+@click.option(
     "--dt",
     "frame_dt",
     type=click.FloatRange(min=0, min_open=True),
     default=None,
-    help="With --track: seconds between frames of SOURCE (default: a video's frame interval; a sequence "
-    "dataset's frames have their times).",
+    help="With --track or --filter: seconds between frames of SOURCE (default: a video's frame interval; a "
+    "sequence dataset's frames have their times).",
 )
 @filter_options
 @click.option(
@@ -631,6 +668,7 @@ def predict(
     min_score: float,
     passes: int,
     track: bool,
+    filtered: bool,
     frame_dt: float | None,
     accel_noise: float,
     angular_accel_noise: float,
@@ -644,14 +682,18 @@ def predict(
     size: docs/posenet.md), boxed by --detector (or --box / --boxes; with --data and neither, the
     ground-truth boxes, as posenet eval), cropped, and its pose decoded in the user's camera."""
     check_output(out, folder=True, overwrite=overwrite)
-    if batch > 1 and track:
-        raise PosenetError("--track seeds each frame from the one before: it takes no --batch")
+    if batch > 1 and (track or filtered):
+        raise PosenetError("the navigation filter takes the frames one after another: --track and --filter "
+                           "take no --batch")  # fmt: skip
+    if track and filtered:
+        raise PosenetError("--track runs the filter already (and seeds the crops from it): give one of "
+                           "--track, --filter")  # fmt: skip
     if (cuda_graphs or bf16) and batch == 1:
         raise PosenetError("--cuda-graphs and --bf16 go with --batch N (N > 1)")
     nav_config = replace(NavConfig(), accel_noise=accel_noise, angular_accel_noise=angular_accel_noise)
     inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
                             preset_intrinsics, onnx_path, min_score, passes, track, frame_dt,
-                            nav_config)  # fmt: skip
+                            nav_config, filtered)  # fmt: skip
     batched = None
     if batch > 1:
         batched = BatchPredictor(inputs.predictor, batch, detector, graphs=cuda_graphs, bf16=bf16)

@@ -31,7 +31,15 @@ from posenet.navigation.filter import (
     NavState,
     PoseFilter,
 )
-from posenet.navigation.noise import NoiseModel, calibrate, robust_covariance
+from posenet.navigation.noise import (
+    Errors,
+    NoiseModel,
+    calibrate,
+    confidence_bands,
+    persistence,
+    robust_covariance,
+    with_persistence,
+)
 from posenet.navigation.smoother import smooth
 from posenet.navigation.so3 import angle_deg, exp, log
 from scgen.scenes.motion.tumble import euler_rates, integrate_tumble
@@ -272,7 +280,7 @@ def test_calibration_bands_give_each_confidence_its_noise(tmp_path) -> None:
     rot = rng.normal(0.0, 0.02, (n, 3)) * scale
     depth = rng.uniform(0.3, 0.6, n)
     t = rng.normal(0.0, 0.01, (n, 3)) * scale * depth[:, None]
-    model = calibrate(conf, rot, t, depth, {"images": "synthetic"})
+    model = calibrate(Errors(conf, rot, t / depth[:, None]), {"images": "synthetic"})
     low, high = model.covariances(0.1, np.array([0, 0, 1.0])), model.covariances(0.9, np.array([0, 0, 1.0]))
     assert np.allclose(np.sqrt(np.diag(low[0])), 0.04, rtol=0.1)
     assert np.allclose(np.sqrt(np.diag(high[0])), 0.02, rtol=0.1)
@@ -305,3 +313,65 @@ def test_the_output_jacobian_is_the_outputs_derivative() -> None:
         turn = log(hi.R @ e0.R.T) - log(lo.R @ e0.R.T)
         column = np.concatenate([hi.t - lo.t, turn, hi.velocity - lo.velocity, hi.omega - lo.omega]) / (2 * h)
         assert np.allclose(J[:, i], column, atol=1e-7), i
+
+
+def test_persistence_recovers_a_bias_that_lasts() -> None:
+    """Whitened errors made of a Gauss-Markov bias (share rho = 0.6 of the variance, time constant 30 s)
+    and white noise, 300 sequences of 60 frames 2 s apart: the fit gives rho and tau back. Each lag's
+    correlation is a mean over ~17,000 pairs of products of unit-variance terms (standard error ~0.01,
+    neighbouring lags correlated), so rho is good to a few hundredths and tau, from the decay over 40 s
+    of lags, to ~15 %: 0.05 and 25 % allowed."""
+    rng = np.random.default_rng(2)
+    rho, tau, dt, frames = 0.6, 30.0, 2.0, 60
+    decay = np.exp(-dt / tau)
+    series = []
+    for _ in range(300):
+        bias = np.zeros((frames, 3))
+        bias[0] = rng.normal(0.0, np.sqrt(rho), 3)
+        for k in range(1, frames):
+            bias[k] = decay * bias[k - 1] + rng.normal(0.0, np.sqrt(rho * (1 - decay**2)), 3)
+        series.append((bias + rng.normal(0.0, np.sqrt(1 - rho), (frames, 3)), dt * np.arange(frames)))
+    rho_fit, tau_fit = persistence(series)
+    assert abs(rho_fit - rho) <= 0.05 and abs(tau_fit - tau) <= 0.25 * tau
+    white = [(rng.normal(size=(frames, 3)), dt * np.arange(frames)) for _ in range(100)]
+    assert persistence(white)[0] <= 0.05  # nothing persists in white noise
+
+
+def test_a_confidence_shared_by_many_images_is_one_band() -> None:
+    """Half the images at confidence 0 (dark frames): the bands do not split them, and a confidence of 0
+    reads the band they are all in."""
+    conf = np.concatenate([np.zeros(500), np.linspace(0.5, 1.0, 500)])
+    bands = confidence_bands(conf, 4)
+    assert [len(b) for b in bands] == [500, 250, 250]
+    rng = np.random.default_rng(3)
+    scale = np.where(conf == 0, 3.0, 1.0)[:, None]
+    rot, trans = rng.normal(0, 0.01, (1000, 3)) * scale, rng.normal(0, 1e-4, (1000, 3))
+    model = calibrate(Errors(conf, rot, trans), {})
+    assert model.band(0.0) == 0 and model.band(0.7) == 1
+    assert np.allclose(np.sqrt(np.diag(model.covariances(0.0, np.array([0, 0, 1.0]))[0])), 0.03, rtol=0.15)
+
+
+def test_the_persistent_share_is_carried_as_a_bias_and_the_rest_as_white_noise() -> None:
+    """Sequences whose errors are half a constant bias and half white noise, twice as large on the
+    low-confidence frames: whitened by their band, the persistent share comes back at ~0.5 whatever the
+    band (the estimate's standard error ~0.03 over 200 sequences: 0.1 allowed); the filter then takes
+    that share of the overall covariance as its bias and the rest of each band's as white noise."""
+    rng = np.random.default_rng(4)
+    n_seq, frames = 200, 30
+    conf = np.tile(np.linspace(0.55, 1.0, frames), n_seq)
+    scale = np.where(conf < 0.8, 2.0, 1.0)[:, None] * 0.02
+    bias = np.repeat(rng.normal(0.0, np.sqrt(0.5), (n_seq, 1, 3)), frames, axis=1).reshape(-1, 3)
+    err = scale * (bias + rng.normal(0.0, np.sqrt(0.5), (n_seq * frames, 3)))
+    errors = Errors(conf, err, err)
+    model = calibrate(errors, {})
+    series = [(np.arange(s * frames, (s + 1) * frames), 2.0 * np.arange(frames)) for s in range(n_seq)]
+    model = with_persistence(model, errors, series, {})
+    assert all(abs(model.persistent[part] - 0.5) <= 0.1 for part in ("rot", "t"))
+    white, band = (
+        model.covariances(0.9, np.array([0.0, 0.0, 1.0]))[0],
+        np.asarray(model.cov_rot[model.band(0.9)]),
+    )
+    assert np.allclose(white, (1 - model.persistent["rot"]) * band)
+    bias_model = model.bias()
+    assert bias_model is not None
+    assert np.allclose(bias_model.cov_rot, model.persistent["rot"] * np.asarray(model.overall["rot"]))

@@ -611,7 +611,8 @@ def test_predict_batch_writes_the_one_at_a_time_records(
         assert a["flags"] == b["flags"] and set(b["time_ms"]) >= {"decode", "detector", "pose_network"}
         np.testing.assert_allclose(a["R"], b["R"], rtol=0, atol=bound.R)
         np.testing.assert_allclose(a["t"], b["t"], rtol=0, atol=bound.t * np.linalg.norm(a["t"]))
-    for extra, message in [(["--track"], "takes no --batch"), (["--cuda-graphs"], "CUDA graphs need")]:
+    for extra, message in [(["--track"], "take no --batch"), (["--filter"], "take no --batch"),
+                           (["--cuda-graphs"], "CUDA graphs need")]:  # fmt: skip
         output = _invoke(
             "predict", *common, "--batch", 2, *extra, "--device", "cpu", "--out", tmp_path / "x", code=1
         )
@@ -635,21 +636,44 @@ def test_track_a_users_video_on_the_filter(
     dataset_dir: Path, user_folder: Path, pose_ckpt: Path, detector_ckpt: Path, tmp_path: Path
 ):
     """--track on a video (no orbit known: the filter at constant velocity and rate in the camera frame):
-    each frame's time is its index over the video's rate; a folder of images needs --dt, and takes it;
-    the Python API (posenet.Tracker) gives the CLI's filtered and smoothed states for the same frames."""
+    each frame's time is its index over the video's rate; --filter boxes every frame with the detector and
+    filters the poses; a folder of images needs --dt, and takes it; the Python API (posenet.Tracker) gives
+    the CLI's filtered and smoothed states for the same frames."""
     ckpt = tmp_path / "last.pt"  # a copy: the shared checkpoint stays read-only
     shutil.copy(pose_ckpt, ckpt)
-    _invoke("calibrate", "--data", dataset_dir, "--ckpt", ckpt, "--split", "test", "--workers", 0)
+    # the untrained network is never confident: every pose its measurement (--min-confidence 0)
+    _invoke(
+        "calibrate",
+        "--data",
+        dataset_dir,
+        "--ckpt",
+        ckpt,
+        "--split",
+        "test",
+        "--workers",
+        0,
+        "--min-confidence",
+        0,
+    )
     images = sorted(user_folder.glob("frame*"))
     _write_video(tmp_path / "clip.mp4", images)
     common = ("--ckpt", ckpt, "--detector", detector_ckpt, "--camera", user_folder / "camera.json",
               "--min-score", 0, "--track", "--no-vis")  # fmt: skip
     _invoke("predict", tmp_path / "clip.mp4", *common, "--out", tmp_path / "video")
     records = _lines(tmp_path / "video" / "predictions.jsonl")
-    assert [r["time_s"] for r in records] == [i * (1 / 10.0) for i in range(len(images))]  # 10 fps: index x dt
+    assert [r["time_s"] for r in records] == [
+        i * (1 / 10.0) for i in range(len(images))
+    ]  # 10 fps: index x dt
     assert all("filter" in r and "smoothed" in r for r in records)
     # the untrained network's noise, calibrated, is wide: any two detections agree and start the filter
     assert records[0]["filter"] is None and all(r["filter"] is not None for r in records[1:])
+    plain = [a for a in common if a != "--track"]
+    _invoke("predict", tmp_path / "clip.mp4", *plain, "--filter", "--out", tmp_path / "filtered")
+    filtered = _lines(
+        tmp_path / "filtered" / "predictions.jsonl"
+    )  # the detector on every frame, then the filter
+    assert [r["box_source"] for r in filtered] == ["detector"] * len(images)
+    assert filtered[0]["filter"] is None and all(r["filter"] is not None for r in filtered[1:])
     assert "give --dt" in _invoke("predict", user_folder, *common, "--out", tmp_path / "folder", code=1)
     assert not (tmp_path / "folder").exists()
     _invoke("predict", user_folder, *common, "--dt", 2.5, "--out", tmp_path / "folder")
@@ -659,8 +683,9 @@ def test_track_a_users_video_on_the_filter(
     tracker = posenet.Tracker.load(ckpt, detector=detector_ckpt, min_score=0.0)
     camera = read_camera_file(user_folder / "camera.json")
     cap = cv2.VideoCapture(str(tmp_path / "clip.mp4"))
-    for i, record in enumerate(records):
+    for record in records:
         ok, image = cap.read()
+        assert ok
         tracked = tracker(image, camera, time=record["time_s"])
         assert tracked.source == record["box_source"]
         if tracked.estimate is None:

@@ -28,7 +28,7 @@ from posenet.navigation.estimate import state_from_camera
 from posenet.navigation.noise import NoiseModel
 from posenet.navigation.scene import sequence_frames
 from posenet.predict.predictor import Predictor, Timings
-from posenet.predict.recrop import box_iou, in_view, projected_box
+from posenet.predict.recrop import box_iou, in_view, model_box, projected_box
 from posenet.predict.sources import dataset_frames, load_frame
 from posenet.predict.track import DETECTOR, NONE, POSE, SEARCH_EVERY, TRACK, Tracker
 from scgen.io import read_sequence_frames
@@ -52,13 +52,14 @@ def _camera(inst):
 
 def test_the_box_at_the_true_pose_is_the_true_box(dataset_dir: Path, sequence_dataset: Path):
     """projected_box at the ground-truth pose gives the annotated bbox_obj (to EDGE_PX, never inside it), also
-    where the box reaches past the image; so a re-crop from any box at a pose equal to the truth crops as
-    training did, and moves a shifted box onto the true one."""
+    where the box reaches past the image, and model_box, of the convex hull's vertices only, the same box;
+    so a re-crop from any box at a pose equal to the truth crops as training did, and moves a shifted box
+    onto the true one."""
     for root in (dataset_dir, sequence_dataset):
         obj = load_object_model(root, 1, 4, 100)
         for inst in _instances(root, "test") + _instances(root, "train"):
             box = projected_box(obj.vertices, inst.R, inst.t, _camera(inst))
-            assert box is not None
+            assert box is not None and model_box(obj, inst.R, inst.t, _camera(inst)) == box  # the hull's
             x, y, w, h = inst.bbox_obj
             excess = np.array([x - box[0], y - box[1], box[0] + box[2] - x - w, box[1] + box[3] - y - h])
             assert excess.min() >= 0 and excess.max() <= EDGE_PX, (inst.key, box, inst.bbox_obj)
@@ -166,8 +167,10 @@ def test_a_tracked_sequence_keeps_its_target(sequence_dataset: Path, sequence_ck
     rendered with, so it is the true box to EDGE_PX (never inside it) and the true centre lies in the crop.
     The tracker then runs the real network on that box, with no detector run."""
     predictor = Predictor.load(sequence_ckpt, passes=1)  # one pass: the seed box is under test
-    wide = np.diag([np.radians(10.0) ** 2] * 3).tolist(), np.diag([0.05**2] * 3).tolist()
-    tracker = Tracker(predictor, NoiseModel([0.0], [wide[0]], [wide[1]], [0.0], 0, {}), min_confidence=0.0)
+    wide = {"rot": np.diag([np.radians(10.0) ** 2] * 3).tolist(), "t": np.diag([0.05**2] * 3).tolist()}
+    white = {"rot": 0.0, "t": 0.0}  # nothing persistent: the filter takes the errors for white
+    noise = NoiseModel([0.0], [wide["rot"]], [wide["t"]], [0.0], 0, {}, wide, white, white, 0.0)
+    tracker = Tracker(predictor, noise, min_confidence=0.0)
     frames = {f.key: f for f in dataset_frames(sequence_dataset, "test", 1)}
     truth = {i.key: i for i in _instances(sequence_dataset)}
     order = read_sequence_frames(sequence_dataset)
@@ -222,7 +225,9 @@ def test_predict_track_on_a_sequence_dataset(
              "--min-score", 0, "--out", root / "pred")  # fmt: skip
     refused = CliRunner().invoke(main, [str(a) for a in track])
     assert refused.exit_code != 0 and "posenet calibrate" in refused.output and not (root / "pred").exists()
-    _invoke("calibrate", *data, "--ckpt", ckpt, "--split", "train")
+    _invoke(
+        "calibrate", *data, "--ckpt", ckpt, "--split", "train", "--min-confidence", 0
+    )  # untrained: never confident
     output = _invoke(*track)
     records = [json.loads(line) for line in (root / "pred" / "predictions.jsonl").read_text().splitlines()]
     order = read_sequence_frames(sequence_dataset)
@@ -237,17 +242,15 @@ def test_predict_track_on_a_sequence_dataset(
             assert searched and "no_detection" in searched[-1]["flags"]
     firsts = [r for i, r in enumerate(records) if i == 0 or records[i - 1]["sequence_id"] != r["sequence_id"]]
     assert all(r["box_source"] == DETECTOR and r["filter"] is None for r in firsts)
-    # the filter starts at a sequence's second frame (two measurements that agree: the untrained network's
-    # noise, calibrated, is wide enough for any two) and the smoother covers what it filtered
-    for r in records:
-        assert (r["filter"] is None) == (r["smoothed"] is None)
+    # the filter starts at the first of two measurements that agree (the untrained network's noise,
+    # calibrated, is wide enough for any two): online from the second frame on, and the smoother, which
+    # runs over the filter's steps, from the first
+    for i, r in enumerate(records):
+        assert (r["filter"] is None) == (r in firsts)
+        assert r["smoothed"] is not None or (r in firsts and records[i + 1]["filter"] is None)
         if r["filter"] is not None:
-            for key in ("t", "velocity", "omega"):
-                assert (
-                    len(r["filter"][key]) == 3
-                    and len(r["filter"]["sigma"][key if key == "t" or key == "velocity" else "omega_deg"])
-                    == 3
-                )
+            for key, sigma in (("t", "t"), ("velocity", "velocity"), ("omega", "omega_deg")):
+                assert len(r["filter"][key]) == 3 and len(r["filter"]["sigma"][sigma]) == 3
             assert {"coasting", "rejected", "twin", "nis"} <= set(r["filter"])
     ran = sum(r["box_source"] == DETECTOR for r in records)
     assert f"the detector ran on {ran} of {len(records)} inputs" in output

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import torch
 import trimesh
+from scipy.spatial import ConvexHull, QhullError
 
 from posenet.data.layout import MAKE_ONE
 from posenet.errors import PosenetError
@@ -36,6 +37,9 @@ class ObjectModel:
     # (K, 4, 4) transforms S with X_cam = R·(S·X) + t showing the same view, identity first (models_info's
     # symmetries, continuous ones discretised: bop.symmetry_transforms); K = 1 without symmetries
     symmetries: np.ndarray
+    # the vertices of the convex hull of `vertices`: through a pinhole, the box of the projected model is
+    # the box of these (posenet.predict.recrop.model_box), ~100 of the bundled model's 5,834
+    hull: np.ndarray
 
     @property
     def symmetric(self) -> bool:
@@ -128,4 +132,14 @@ def _object_model(
         fps_points=farthest_point_sampling(vertices, num_regions),
         pm_points=surface_points(mesh, num_pm),
         symmetries=symmetries,
+        hull=hull_vertices(vertices),
     )
+
+
+def hull_vertices(vertices: np.ndarray) -> np.ndarray:
+    """The vertices on the convex hull of a point set (all of them where qhull cannot build one: a flat
+    or degenerate set)."""
+    try:
+        return np.asarray(vertices)[ConvexHull(vertices).vertices]
+    except QhullError:
+        return np.asarray(vertices)

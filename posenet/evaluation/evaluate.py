@@ -36,7 +36,7 @@ from posenet.geometry import decode_pose
 from posenet.models import PoseNet
 from posenet.predict.confidence import batch_confidences
 from posenet.predict.ransac import PNP_LABELS, ransac_poses
-from posenet.predict.recrop import box_iou, projected_box
+from posenet.predict.recrop import box_iou, model_box
 
 BATCH_SIZE = 32
 LATENCY_WARMUP = 5  # untimed batch-1 forwards (allocator, cuDNN autotuning)
@@ -283,7 +283,7 @@ def recrop_boxes(
         if inst.key not in misses and r["R"] is not None:
             camera = make_camera(inst.K, inst.dist, inst.image_size)
             R = np.asarray(r["R"], np.float64).reshape(3, 3)
-            again = projected_box(dataset.obj.vertices, R, np.asarray(r["t"], np.float64), camera)
+            again = model_box(dataset.obj, R, np.asarray(r["t"], np.float64), camera)
         out[inst.key] = again if again is not None else box
     return out
 

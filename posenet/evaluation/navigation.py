@@ -84,7 +84,7 @@ def run_filter(
 ) -> SequenceRun:
     """One sequence's frames (`keys`, in time order) through the filter and the smoother, each frame's
     pose (R, t, confidence) its measurement where it has one."""
-    f = make_filter(body, obj.diameter, obj.symmetries, frames[keys[0]], config)
+    f = make_filter(body, obj.diameter, obj.symmetries, frames[keys[0]], config, noise.bias())
     run = SequenceRun(keys)
     for key in keys:
         frame = frames[key]

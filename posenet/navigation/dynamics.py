@@ -99,14 +99,14 @@ class AttitudeModel:
         if self.inertia is None:
             R_next, w_next = R @ exp(w * dt), w
         else:
-            J = self.inertia
+            J, J_inv = self.inertia, self.inverse_inertia
             steps = max(1, math.ceil(np.linalg.norm(w) * abs(dt) / MAX_TURN_RAD))
             h, R_next, w_next = dt / steps, R, w
             for _ in range(steps):
-                k1 = euler_rates(J, w_next)
-                k2 = euler_rates(J, w_next + 0.5 * h * k1)
-                k3 = euler_rates(J, w_next + 0.5 * h * k2)
-                k4 = euler_rates(J, w_next + h * k3)
+                k1 = euler_rates(J, w_next, J_inv)
+                k2 = euler_rates(J, w_next + 0.5 * h * k1, J_inv)
+                k3 = euler_rates(J, w_next + 0.5 * h * k2, J_inv)
+                k4 = euler_rates(J, w_next + h * k3, J_inv)
                 w_end = w_next + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
                 R_next = R_next @ exp(0.5 * h * (w_next + w_end))
                 w_next = w_end

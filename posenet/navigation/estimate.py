@@ -47,8 +47,9 @@ class Estimate:
 
 
 def output_jacobian(state: NavState, frames: CameraFrames, c: np.ndarray) -> np.ndarray:
-    """d[t, rotation, velocity, w] / d[dp, dv, a, dw] at `state` (12x12): with R = R_CM, the rotation's
-    error in camera axes R a, Rc = R c, w = R w_B - w_CA and R exp(a) c ~ Rc - R [c]x a,
+    """d[t, rotation, velocity, w] / d[dp, dv, a, dw, bias] at `state` (12 x the state's size; the outputs
+    do not depend on a measurement bias): with R = R_CM, the rotation's error in camera axes R a, Rc = R c,
+    w = R w_B - w_CA and R exp(a) c ~ Rc - R [c]x a,
 
         t:   R_CN dp + R [c]x a
         rot: R a
@@ -61,7 +62,7 @@ def output_jacobian(state: NavState, frames: CameraFrames, c: np.ndarray) -> np.
     w = R @ state.w - frames.w_ca
     dw_da, dw_dw = -R @ skew(state.w), R
     dRc_da = -R @ skew(c)
-    J = np.zeros((DIM, DIM))
+    J = np.zeros((DIM, len(state.P)))
     J[T, POS], J[T, ATT] = R_cn, -dRc_da
     J[ROT, ATT] = R
     J[OMEGA, ATT], J[OMEGA, RATE] = dw_da, dw_dw
@@ -96,9 +97,10 @@ def state_from_camera(
 ) -> NavState:
     """The filter state whose camera-frame outputs are (R, t, velocity, omega): the inverse of
     `camera_estimate`, for a track started from a known state (PoseFilter.start_from), with covariance P
-    (the error state's)."""
+    (the error state's; beyond its first 12, a measurement bias's, at none)."""
     Rc = R @ np.asarray(centre_of_mass, np.float64)
     p_c = t + Rc
     v_c = velocity + np.cross(omega, Rc) + np.cross(frames.w_cn, p_c)
     w_b = R.T @ (omega + frames.w_ca)
-    return NavState(float(time), frames.R_nc @ p_c, frames.R_nc @ v_c, frames.R_ac @ R, w_b, P)
+    bias = np.zeros(len(P) - DIM)  # a filter's measurement bias, if it has one, at none
+    return NavState(float(time), frames.R_nc @ p_c, frames.R_nc @ v_c, frames.R_ac @ R, w_b, P, bias)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from posenet.navigation.filter import CAMERA, CameraFrames, NavConfig, PoseFilter
+from posenet.navigation.filter import CAMERA, CameraFrames, MeasurementBias, NavConfig, PoseFilter
 from scgen.io import ScgenError, SequenceFrame
 from scgen.scenes.motion.orbit import R_EARTH, lvlh_to_inertial, mean_motion
 from scgen.scenes.motion.tumble import mass_properties, quats_to_matrices
@@ -71,9 +71,11 @@ def make_filter(
     symmetries: np.ndarray | None,
     first: SequenceFrame | None,
     config: NavConfig | None = None,
+    bias: MeasurementBias | None = None,
 ) -> PoseFilter:
     """A filter for a target: in LVLH with HCW and torque-free attitude where the sequence's first frame
-    gives the chaser's state (orbit_rate), else in the camera frame at constant velocity and rate."""
+    gives the chaser's state (orbit_rate), else in the camera frame at constant velocity and rate; with
+    the measurements' persistent `bias` (posenet.navigation.noise.NoiseModel.bias)."""
     n = None if first is None else orbit_rate(first)
     inertia = body.inertia if n is not None else None
-    return PoseFilter.for_motion(body.centre_of_mass, diameter, symmetries, n, inertia, config)
+    return PoseFilter.for_motion(body.centre_of_mass, diameter, symmetries, n, inertia, config, bias)

@@ -14,13 +14,20 @@ Frames before the start have no estimate. Pure numpy.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from posenet.navigation.filter import NavState, Step
+from posenet.navigation.filter import NavState, Step, one_blas_thread
 
 
 def smooth(history: list[Step]) -> list[NavState | None]:
     """The smoothed state of each step of `history` (a PoseFilter's), None where the filter had none."""
+    with one_blas_thread():  # small matrices: posenet.navigation.filter
+        return _smooth(history)
+
+
+def _smooth(history: list[Step]) -> list[NavState | None]:
     out: list[NavState | None] = [s.posterior for s in history]
     later: NavState | None = None  # the smoothed state of the step after k
     for k in range(len(history) - 1, -1, -1):
@@ -33,10 +40,12 @@ def smooth(history: list[Step]) -> list[NavState | None]:
             later = step.posterior  # the chain's last step: its filtered state is its smoothed one
             out[k] = later
             continue
-        C = np.linalg.solve(nxt.prior.P, nxt.phi @ step.posterior.P).T  # P_k|k Phi^T P_k+1|k^-1
+        # P_k|k Phi^T P_k+1|k^+ (the pseudo-inverse: a state of zero variance, the bias of a part with
+        # nothing persistent, takes no gain)
+        C = step.posterior.P @ nxt.phi.T @ np.linalg.pinv(nxt.prior.P, hermitian=True)
         d = later.minus(nxt.prior)
         P = step.posterior.P + C @ (later.P - nxt.prior.P) @ C.T
         smoothed = step.posterior.plus(C @ d)
-        later = NavState(smoothed.time, smoothed.p, smoothed.v, smoothed.R, smoothed.w, 0.5 * (P + P.T))
+        later = replace(smoothed, P=0.5 * (P + P.T))
         out[k] = later
     return out

@@ -42,7 +42,7 @@ from posenet.predict.predictor import (
     load_box_detector,
     pose_flags,
 )
-from posenet.predict.recrop import projected_box
+from posenet.predict.recrop import model_box
 from scgen.io import usable_cores
 
 WARMUP = 3  # eager runs on a side stream before a capture (cuDNN picks its kernels; lazy buffers made)
@@ -201,7 +201,7 @@ class BatchPredictor:
         for k in range(p.passes):  # after the first, re-crops around the model's box at the pose before
             if k:  # as Predictor.__call__: an image whose pose projects to no box stops there
                 tic = time.perf_counter()
-                again = {i: projected_box(p.obj.vertices, *solved[i][:2], p.camera) for i in todo}
+                again = {i: model_box(p.obj, *solved[i][:2], p.camera) for i in todo}
                 self._spent("crop", tic, len(todo))
                 todo = [i for i in todo if again[i] is not None]
                 for i in todo:

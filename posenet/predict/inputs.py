@@ -34,9 +34,9 @@ class PredictInputs:
     camera: Camera | None  # None with --data: each frame brings its own
     box_for: Callable[[Frame, int], Box | str | None]
     video_fps: float = 0.0
-    tracker: Tracker | None = None  # --track
+    tracker: Tracker | None = None  # --track or --filter
     sequences: dict[tuple[int, int], SequenceFrame] | None = None  # a sequence dataset's frames
-    frame_dt: float | None = None  # --track outside a sequence dataset: the seconds between frames
+    frame_dt: float | None = None  # the filter outside a sequence dataset: the seconds between frames
 
     def sequence_of(self, frame: Frame) -> SequenceFrame | None:
         """A dataset frame's sequence, frame number and time; None outside a sequence dataset."""
@@ -85,10 +85,12 @@ def predict_inputs(
     track: bool = False,
     frame_dt: float | None = None,
     nav_config: NavConfig | None = None,
+    filtered: bool = False,
 ) -> PredictInputs:
     """The checked inputs of one predict run (nothing is written here). A sequence dataset's frames come
-    in time order, sequence by sequence (what `track` and the per-sequence overlay videos need). With
-    `track`, the checkpoint's calibrated noise is read (posenet calibrate) and each frame's time is its
+    in time order, sequence by sequence (what the filter and the per-sequence overlay videos need). With
+    `filtered` (every frame's pose through the navigation filter) or `track` (also each crop seeded from
+    it), the checkpoint's calibrated noise is read (posenet calibrate) and each frame's time is its
     sequence's, else its index times `frame_dt` (default: a video's own frame interval)."""
     if (source is None) == (data is None):
         raise PosenetError("give SOURCE (an image, folder, glob or video) or --data DIR, not both or neither")
@@ -101,7 +103,7 @@ def predict_inputs(
         raise PosenetError("--track seeds each frame from the last pose and finds the target with the "
                            "detector: give --detector, and neither --box nor --boxes")  # fmt: skip
     fixed_box = parse_box(box) if box is not None else None
-    noise = NoiseModel.load(require_noise(ckpt)) if track else None
+    noise = NoiseModel.load(require_noise(ckpt)) if track or filtered else None
     predictor = Predictor.load(ckpt, detector, device, data, onnx, min_score, passes)
     sequences = read_sequence_frames(data) if data is not None else {}
     obj_id = predictor.obj.obj_id
@@ -134,14 +136,14 @@ def predict_inputs(
         return None
 
     tracker = None
-    if track:
+    if track or filtered:
         assert noise is not None
         if not sequences:
             frame_dt = frame_dt or (1.0 / fps if fps > 0 else None)
             if frame_dt is None:
-                raise PosenetError("--track needs each frame's time: give --dt SECONDS between frames "
+                raise PosenetError("the filter needs each frame's time: give --dt SECONDS between frames "
                                    "(a video has its rate, a sequence dataset its times)")  # fmt: skip
-        tracker = Tracker(predictor, noise, nav_config)
+        tracker = Tracker(predictor, noise, nav_config, seed_crops=track)
     return PredictInputs(predictor, stream, total, user, box_for, fps, tracker, sequences, frame_dt)
 
 

@@ -37,11 +37,10 @@ from posenet.data.layout import image_size, scan_split
 from posenet.data.object_model import ObjectModel, load_object_model, object_from_record
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose, mask_probability
-from posenet.predict.confidence import pose_confidence
+from posenet.predict.confidence import LOW_CONFIDENCE, pose_confidence
 from posenet.predict.pixels import to_bgr8
-from posenet.predict.recrop import PREDICT_PASSES, projected_box
+from posenet.predict.recrop import PREDICT_PASSES, model_box
 
-LOW_CONFIDENCE = 0.5  # below: the pose is flagged low_confidence
 FLAGS = ("no_detection", "behind_camera", "outside_view", "low_confidence")
 STAGES = ("decode", "detector", "crop", "pose_network", "solve", "drawing")  # timed per image (ms)
 
@@ -208,7 +207,7 @@ class Predictor:
         crops = [train_box]
         for _ in range(self.passes - 1):  # re-crop around the box of the model at the pose just decoded
             with _Clock(self.timings, "crop"):
-                again = projected_box(self.obj.vertices, R, t, self.camera)
+                again = model_box(self.obj, R, t, self.camera)
             if again is None:
                 break
             R, t, confidence = self._estimate(seen, again)

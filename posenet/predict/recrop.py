@@ -14,6 +14,7 @@ import numpy as np
 
 from posenet.data.boxes import Box, clip_box
 from posenet.data.camera import Camera, project
+from posenet.data.object_model import ObjectModel
 
 # Pose-network runs per image in `posenet predict` and the Python Predictor: the box, then one re-crop.
 # On 1,600 held-out corridor images the second pass beat the first from every box (the true one, noisy
@@ -34,6 +35,14 @@ def projected_box(vertices: np.ndarray, R: np.ndarray, t: np.ndarray, camera: Ca
     if u1 < u0 or v1 < v0:
         return None
     return float(u0), float(v0), float(u1 - u0 + 1), float(v1 - v0 + 1)
+
+
+def model_box(obj: ObjectModel, R: np.ndarray, t: np.ndarray, camera: Camera) -> Box | None:
+    """`projected_box` of the object at (R, t): through a pinhole, of its convex hull's vertices alone,
+    the same box (a projective map keeps the points in front of the camera convex, and the box of a set is
+    the box of its hull's extreme points; one is behind the camera exactly when a hull vertex is), ~50x
+    quicker for the bundled model; through a lens, of every vertex."""
+    return projected_box(obj.vertices if camera.distorted else obj.hull, R, t, camera)
 
 
 def box_iou(a: Box, b: Box) -> float:

@@ -32,8 +32,9 @@ from posenet.navigation.filter import CAMERA, POS, CameraFrames, NavConfig, NavS
 from posenet.navigation.noise import NoiseModel, measurement, require_noise
 from posenet.navigation.scene import make_filter, target_body
 from posenet.navigation.smoother import smooth
-from posenet.predict.predictor import LOW_CONFIDENCE, Box, Pose, Predictor
-from posenet.predict.recrop import in_view, projected_box
+from posenet.predict.confidence import LOW_CONFIDENCE
+from posenet.predict.predictor import Box, Pose, Predictor
+from posenet.predict.recrop import in_view, model_box
 from scgen.io import SequenceFrame
 
 MIN_IN_VIEW = 0.5  # a seed box with less of its area in the image has left the view
@@ -91,7 +92,9 @@ def _round(x: float | None) -> float | None:
 class Tracker:
     """A Predictor run frame after frame on the navigation filter; `reset(first)` between sequences.
     `noise` is the checkpoint's calibrated measurement noise (posenet calibrate); `detections` counts the
-    detector's runs."""
+    detector's runs. Without `seed_crops` every frame is boxed as without the filter (the detector on
+    every frame, or the given box) and the filter only takes the poses: the crops stay independent of
+    the filter's own estimate (posenet predict --filter)."""
 
     def __init__(
         self,
@@ -100,15 +103,13 @@ class Tracker:
         config: NavConfig | None = None,
         min_confidence: float = LOW_CONFIDENCE,
         search_every: int = SEARCH_EVERY,
+        seed_crops: bool = True,
     ) -> None:
         self.predictor, self.noise, self.config = predictor, noise, config or NavConfig()
-        self.min_confidence, self.search_every = min_confidence, search_every
-        obj = predictor.obj
-        self.body = target_body(obj.vertices, obj.faces)
+        self.min_confidence, self.search_every, self.seed_crops = min_confidence, search_every, seed_crops
+        self.body = target_body(predictor.obj.vertices, predictor.obj.faces)
         self.detections = 0
-        self.filter: PoseFilter = make_filter(self.body, obj.diameter, obj.symmetries, None, self.config)
-        self._previous: Pose | None = None
-        self._since_search = search_every  # frames since the detector last found nothing
+        self.reset()
 
     @classmethod
     def load(cls, ckpt: Path, config: NavConfig | None = None, **predictor: Any) -> Tracker:
@@ -120,8 +121,12 @@ class Tracker:
         """Forget the track: a new sequence (its first frame tells the filter the chaser's state, if
         the dataset has it)."""
         obj = self.predictor.obj
-        self.filter = make_filter(self.body, obj.diameter, obj.symmetries, first, self.config)
-        self._previous, self._since_search = None, self.search_every
+        bias = self.noise.bias()
+        self.filter: PoseFilter = make_filter(
+            self.body, obj.diameter, obj.symmetries, first, self.config, bias
+        )
+        self._previous: Pose | None = None
+        self._since_search = self.search_every  # frames since the detector last found nothing
 
     def __call__(
         self,
@@ -134,8 +139,12 @@ class Tracker:
         """The frame at `time` (s): its pose (at `box` if given), the filter's step and estimate."""
         cam = (camera if isinstance(camera, Camera) else make_camera(camera)).for_image(image.shape[1::-1])
         pose, source = None, NONE
+        self._predicted: tuple[NavState, np.ndarray] | None = None
         if box is not None:
             pose, source = self.predictor(image, cam, box), GIVEN
+        elif not self.seed_crops:
+            pose, source = self.predictor(image, cam), DETECTOR
+            self.detections += 1
         else:
             seed, source = self.seed(time, frames, cam)
             if seed is not None:
@@ -149,7 +158,7 @@ class Tracker:
         else:
             self._since_search += 1
         m = measurement(pose.R, pose.t, pose.confidence, self.noise) if found else None  # type: ignore[union-attr]
-        step = self.filter.step(time, frames, m)
+        step = self.filter.step(time, frames, m, self._predicted)
         self._previous = pose if self.holds(pose) else None
         return TrackedFrame(pose, source, step, self._estimate(step.posterior, frames))
 
@@ -160,7 +169,7 @@ class Tracker:
         """The crop box of the frame at `time`: the filter's predicted pose while it is locked, else the
         previous frame's good pose; None (detect) without either."""
         size = cam.size or (0, 0)
-        predicted = self.filter.predict(time, frames)
+        predicted = self._predicted = self.filter.predict(time, frames)  # the step takes it, not made twice
         if predicted is not None:
             state = predicted[0]
             spread = 3.0 * float(np.sqrt(np.linalg.eigvalsh(state.P[POS, POS]).max()))
@@ -178,7 +187,7 @@ class Tracker:
     def _box(self, R: Any, t: Any, cam: Camera, size: tuple[int, int]) -> Box | None:
         if t is None or R is None or t[2] <= 0:
             return None
-        box = projected_box(self.predictor.obj.vertices, R, t, cam)
+        box = model_box(self.predictor.obj, R, t, cam)
         return box if box is not None and in_view(box, size, MIN_IN_VIEW) else None
 
     def holds(self, pose: Pose | None) -> bool:

@@ -133,8 +133,11 @@ def quats_to_matrices(q: np.ndarray) -> np.ndarray:
     return Rotation.from_quat(flat).as_matrix().reshape(q.shape[:-1] + (3, 3))
 
 
-def euler_rates(inertia: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Torque-free Euler's equations: w' = J^-1 (-w x J w), body axes."""
+def euler_rates(inertia: np.ndarray, w: np.ndarray, inverse: np.ndarray | None = None) -> np.ndarray:
+    """Torque-free Euler's equations: w' = J^-1 (-w x J w), body axes (with `inverse`, J^-1 given: a
+    caller that steps often keeps it)."""
+    if inverse is not None:
+        return inverse @ -np.cross(w, inertia @ w)
     return np.linalg.solve(inertia, -np.cross(w, inertia @ w))
 
 
