@@ -1,9 +1,9 @@
 """Relative navigation along held-out rendezvous sequences (issue 77): the network frame by frame against
 the navigation filter around it, on the same frames, scored against scgen's exact trajectory.
 
-    python benchmarks/navigation.py --pose POSE/last.pt --detector DET/best.pt --data SEQUENCES \\
+    python benchmarks/figures/navigation.py --pose POSE/last.pt --detector DET/best.pt --data SEQUENCES \\
         --calibrate TRAINING_SET --calibrate-sequences CALIBRATION_SEQUENCES --out OUT \\
-        [--calibrate-split test] [--split test] [--passes 2] [--onnx]
+        [--calibrate-split test] [--split test] [--passes 2] [--onnx] [--picture docs/navigation.png]
 
 SEQUENCES is a scgen sequence render the networks never saw (a seed never trained on). The pose
 checkpoint's measurement noise is calibrated first (posenet calibrate: the error bands on --calibrate's
@@ -23,8 +23,9 @@ Each is scored on every frame of the split (posenet.evaluation.navigation.naviga
 without a pose fails ADD): ADD@0.1d, the median rotation and translation errors, jitter, the velocity
 and angular velocity errors (the per-frame rows' by finite differences), and the share of frames whose
 true error lies inside the filter's 3 sigma. The goals of issue 77 are checked below the table. Writes
-OUT/report.json and OUT/navigation.png: the error and the filter's 3 sigma against time through the
-longest eclipse of the split, per frame against filtered and smoothed.
+OUT/report.json and the picture (--picture, default OUT/navigation.png; docs/navigation.png is one): the
+error and the filter's 3 sigma against time through the longest eclipse of the split, per frame against
+filtered and smoothed.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
 from harness import parser, pyplot, run_script
 
 from posenet.checkpoint import load_checkpoint
@@ -195,7 +198,7 @@ def score(args: argparse.Namespace, records: dict[str, list[dict[str, Any]]]) ->
     figures = {name: navigation_figures(est, sequences, truth, frames, obj) for name, est in rows.items()}
     for name in ("--filter: filtered", "--track: filtered"):
         figures[name]["after_start"] = frames_after_start(rows[name], sequences)
-    draw(args.out / "navigation.png", sequences, frames, truth, rows)
+    draw(args.picture or args.out / "navigation.png", sequences, frames, truth, rows)
     eclipsed = sum(bool(frames[k].eclipse) for k in truth)
     return {"rows": figures, "frames": len(truth), "eclipsed_frames": eclipsed, "sequences": len(sequences)}
 
@@ -358,6 +361,7 @@ def main() -> None:
     )
     p.add_argument("--onnx", action="store_true", help="both networks through onnxruntime (posenet export)")
     p.add_argument("--min-confidence", type=float, default=LOW_CONFIDENCE, help="posenet calibrate's")
+    p.add_argument("--picture", type=Path, default=None, help="its file (default OUT/navigation.png)")
     p.add_argument("--passes", type=int, default=PREDICT_PASSES)
     p.add_argument("--out", type=Path, required=True)
     run_script(run, p.parse_args())
