@@ -18,16 +18,18 @@ of errors trimmed is kept beside it: the outlier rate a user should expect.
 
 **The persistent part.** A network's error on a frame is not independent of its error on the next: a
 sequence of similar views shares most of it (a bias of the view, not of the frame), so no number of
-frames averages it away. Where the calibration split is a sequence dataset, the errors of each sequence,
+frames averages it away. Along labelled sequences (`with_persistence`), the errors of each sequence,
 whitened by their band's covariance, give their autocorrelation against the time between frames, fitted
 by rho exp(-dt / tau) (`persistence`): rho is the share of each part's variance that persists, tau
 how long it lasts. The filter carries that share as a bias state (posenet.navigation.filter.
 MeasurementBias: rho times the split's overall covariance, with time constant tau) and takes the rest,
-(1 - rho) times the band's covariance, as each frame's white noise. On a split of independent frames
-there is nothing to measure it with: rho = 0, and the filter treats the errors as white (and so grows
-overconfident on a long sequence of one view).
+(1 - rho) times the band's covariance, as each frame's white noise. Without labelled sequences there is
+nothing to measure it with: rho = 0, and the filter treats the errors as white (and so grows overconfident
+on a long sequence of one view).
 
-Written as JSON beside the checkpoint (`noise_path`): posenet predict --track and posenet eval read it.
+A pose under the model's `min_confidence` is no measurement (`measurement` gives None): none was
+calibrated on. Written as JSON beside the checkpoint (`noise_path`): posenet predict --filter / --track
+and posenet eval read it.
 """
 
 from __future__ import annotations
@@ -132,7 +134,9 @@ class NoiseModel:
 
     def table(self) -> str:
         """One line per band: its confidence range, the 1-sigma of each error and the outlier share."""
-        lines = ["confidence  rotation 1-sigma x,y,z (deg)  translation 1-sigma x,y,z (% of depth)  outliers"]
+        header = "confidence  rotation 1-sigma x,y,z (deg)  translation 1-sigma x,y,z (% of depth)  outliers"
+        lines = [f"{self.images} calibration images; a pose under confidence {self.min_confidence:g} is no "
+                 "measurement (none was calibrated on)", header]  # fmt: skip
         for b, lo in enumerate(self.edges):
             hi = self.edges[b + 1] if b + 1 < len(self.edges) else 1.0
             rot = np.degrees(np.sqrt(np.diag(self.cov_rot[b])))

@@ -15,7 +15,8 @@ Per frame, at time t (the sequence's, or the frame's index over the video's rate
 The pose (the raw measurement, kept) goes into the filter with its calibrated covariance; the filter gates
 it, updates or coasts. Through an eclipse the filter coasts on its prediction and its covariance grows;
 the detector is not needed while the prediction holds. At the end of a sequence the smoother gives the
-best trajectory of the frames seen (`smoothed`).
+best trajectory of the frames seen (`smoothed`). Without `seed_crops` (posenet predict --filter) every
+frame is boxed as without the filter, and the filter only takes the poses.
 """
 
 from __future__ import annotations
