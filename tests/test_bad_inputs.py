@@ -101,6 +101,7 @@ SPECS: dict[str, Spec] = {
         {"json": "file", "predictions": "file", "bop_csv": "file"},
     ),
     "posenet boxes": Spec("--data {data} --detector {det} --out {out}", {"out": "file"}),
+    "posenet calibrate": Spec("--data {data} --ckpt {pose} --split test --workers 0 --min-confidence 0"),
     "posenet export": Spec("--ckpt {pose} --onnx {onnx}", {"onnx": "file"}),
     "posenet viz": Spec("--data {data} --ckpt {pose} --samples {test_id} --out {out}", {"out": "folder"}),
     "posenet bench": Spec("--variant gdrnet --smoke --warmup 0 --iters 1 --json {json}", {"json": "file"}),
@@ -161,6 +162,13 @@ NOT_APPLICABLE: dict[str, dict[str, str]] = {
     "posenet train-detector": {},
     "posenet eval": {"bad_config": NO_CONFIG},
     "posenet boxes": {"bad_config": NO_CONFIG},
+    "posenet calibrate": {
+        **dict.fromkeys(
+            ("missing_parent", "under_file", *STORAGE), "writes beside its checkpoint: no output path"
+        ),
+        "existing_output": "replaces the checkpoint's noise file, as re-calibrating is meant to",
+        "bad_config": NO_CONFIG,
+    },
     "posenet export": {
         "corrupt_image": "reads a checkpoint only",
         "bad_config": NO_CONFIG,
