@@ -15,6 +15,7 @@ import torch
 from tqdm import tqdm
 
 from clishell.group import OneLineErrorGroup
+from clishell.types import FiniteFloatRange
 from posenet.checkpoint import load_checkpoint, load_model
 from posenet.config import AMP_MODES, config_from_dict, load_config
 from posenet.data.boxes import boxes_from_gt
@@ -56,7 +57,7 @@ PATH = click.Path(path_type=Path)
 # posenet train's and train-detector's: both fit their schedule with posenet.training.budget
 minutes_option = click.option(
     "--minutes",
-    type=click.FloatRange(min=0, min_open=True),
+    type=FiniteFloatRange(min=0, min_open=True),
     default=None,
     help="Wall-time budget: the schedule is fitted while it runs so that its cosine ends after M minutes "
     "(set-up included); the fitted steps are printed. A new run only: no --resume or --max-steps.",
@@ -84,7 +85,7 @@ def filter_options(command: Callable[..., Any]) -> Callable[..., Any]:
         ("--angular-accel-noise", "angular_accel_noise", "the angular one, sqrt PSD (rad / s^1.5)"),
     ):  # fmt: skip
         command = click.option(
-            name, attr, type=click.FloatRange(min=0, min_open=True), default=getattr(defaults, attr),
+            name, attr, type=FiniteFloatRange(min=0, min_open=True), default=getattr(defaults, attr),
             show_default=True, help=f"Navigation filter: {text}.",
         )(command)  # fmt: skip
     return command
@@ -319,7 +320,7 @@ def train_detector_cmd(
 @click.option("--out", type=PATH, required=True, help="Box file to write (BOP detection JSON).")
 @click.option("--split", default="test", show_default=True)
 @click.option("--detector", type=PATH, default=None, help="Detector checkpoint; default: GT boxes.")
-@click.option("--noise", type=click.FloatRange(min=0), default=0.0, show_default=True,
+@click.option("--noise", type=FiniteFloatRange(min=0), default=0.0, show_default=True,
               help="Relative std of centre shift and log size change (0: exact GT boxes).")  # fmt: skip
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--obj-id", type=click.IntRange(min=1), default=1, show_default=True, help="Object to box.")
@@ -484,7 +485,7 @@ def navigation_summary(data: Path, split: str, ckpt: Path, result: Any, config: 
 @passes_option(PREDICT_PASSES, "predict's default, which the tracker's measurements use.")
 @click.option(
     "--min-confidence",
-    type=click.FloatRange(0, 1),
+    type=FiniteFloatRange(0, 1),
     default=LOW_CONFIDENCE,
     show_default=True,
     help="A pose under this confidence is no measurement to the filter (a dark frame's guess): neither "
@@ -606,7 +607,7 @@ def viz(
 )
 @click.option(
     "--min-score",
-    type=click.FloatRange(0, 1),
+    type=FiniteFloatRange(0, 1),
     default=MIN_SCORE,
     show_default=True,
     help="The detector's score floor: a best box scoring less is no detection (flag no_detection).",
@@ -631,7 +632,7 @@ def viz(
 @click.option(
     "--dt",
     "frame_dt",
-    type=click.FloatRange(min=0, min_open=True),
+    type=FiniteFloatRange(min=0, min_open=True),
     default=None,
     help="With --track or --filter: seconds between frames of SOURCE (default: a video's frame interval; a "
     "sequence dataset's frames have their times).",

@@ -448,6 +448,22 @@ def test_a_checkpoint_of_the_wrong_kind_is_named(command: str, world: World, tmp
     assert tried, f"{command} reads no checkpoint: declare it in NOT_APPLICABLE"
 
 
+@pytest.mark.parametrize("command", [c for c in COMMANDS if SPECS[c].resume is not None])
+def test_a_resumed_run_removes_what_a_killed_write_left(command: str, world: World, tmp_path: Path):
+    """A run killed while writing its checkpoint (SIGKILL: no handler runs) leaves the temporary of its
+    atomic write, last.pt.tmp-PID; resuming the run removes it, and the run goes on."""
+    spec = SPECS[command]
+    out = tmp_path / "run"
+    out.mkdir()
+    shutil.copy(world.pose if spec.resume == "pose" else world.det, out / "last.pt")
+    (out / "last.pt.tmp-4242").write_bytes(b"")
+    argv = [*argv_for(spec, world, tmp_path, out=out), "--resume"]
+    group, *name = command.split()
+    result = CliRunner().invoke(GROUPS[group], [*name, *map(str, argv)])
+    assert result.exit_code == 0, result.output
+    assert not (out / "last.pt.tmp-4242").exists() and (out / "last.pt").is_file()
+
+
 @pytest.mark.parametrize("command", COMMANDS)
 def test_a_corrupt_image_is_named_before_anything_is_written(command: str, world: World, tmp_path: Path):
     applies(command, "corrupt_image")
@@ -552,3 +568,47 @@ def test_posenet_starts_without_the_optional_augmentation_package(world: World, 
     done = posenet("train", *argv_for(SPECS["posenet train"], world, tmp_path))
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "fresh" / "out" / "last.pt").is_file()
+
+
+# Every numeric option and camera value that is not finite (a comparison with nan is always false, so a
+# range check alone lets it through): each is one line naming it, nothing written. (command, argv with
+# the matrix's placeholders and {tmp}, what the line names)
+PREDICT_DATA = "--data {data} --ckpt {pose} --out {tmp}/p"
+PREDICT_IMAGE = "{data} --ckpt {pose} --out {tmp}/p"
+NOT_FINITE = [
+    ("posenet predict", f"{PREDICT_DATA} --detector {{det}} --min-score nan", "--min-score"),
+    ("posenet predict", f"{PREDICT_IMAGE} --camera training --box nan,10,20,20", "nan,10,20,20"),
+    ("posenet predict", f"{PREDICT_IMAGE} --camera 300,300,inf,120 --box 1,1,9,9", "cx=inf"),
+    ("posenet predict", f"{PREDICT_IMAGE} --camera 300,300,160,120,nan,0,0,0 --box 1,1,9,9", "distortion"),
+    ("posenet predict", f"{PREDICT_DATA} --detector {{det}} --filter --dt inf", "--dt"),
+    ("posenet predict", f"{PREDICT_DATA} --filter --accel-noise nan", "--accel-noise"),
+    ("posenet boxes", "--data {data} --out {tmp}/b.json --noise inf", "--noise"),
+    ("posenet calibrate", "--data {data} --ckpt {pose} --min-confidence nan", "--min-confidence"),
+    ("posenet train", f"{RUN} --minutes nan", "--minutes"),
+    ("scgen render", "--n 2 --out {tmp}/r --backend mitsuba --split nan,0,1", "nan,0,1"),
+    ("scgen render", "--n 2 --out {tmp}/r --backend mitsuba --config {tmp}/fx.yaml", "fx=nan"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("command", "argv", "naming"), NOT_FINITE)
+def test_a_number_that_is_not_finite_is_one_line(
+    command: str, argv: str, naming: str, world: World, tmp_path: Path
+):
+    (tmp_path / "fx.yaml").write_text("camera:\n  fx: .nan\n")
+    values = {"data": world.dataset, "pose": world.pose, "det": world.det, "tmp": tmp_path,
+              "out": tmp_path / "o", "config": world.configs["pose"]}  # fmt: skip
+    run_refused(command, [a.format(**values) for a in argv.split()], world, tmp_path, naming)
+
+
+@pytest.mark.parametrize("command", ["scgen render", "scgen preview"])
+def test_a_frame_that_cannot_fit_in_memory_is_refused_before_any_work(
+    command: str, world: World, tmp_path: Path
+):
+    """99,999 x 99,999 pixels need at least 500 GiB for one sample (scgen.io.buffers.SAMPLE_BYTES_PER_PIXEL):
+    refused from the config, before a folder is made or a sample tried."""
+    out = tmp_path / "big"
+    argv = ["--out", str(out), "--resolution", "99999x99999", "--backend", "mitsuba"]
+    run_refused(
+        command, [*(["--n", "1"] if command == "scgen render" else []), *argv], world, tmp_path, "99999x99999"
+    )
+    assert not out.exists()

@@ -100,10 +100,15 @@ def make_camera(K: np.ndarray, dist: Any = None, size: tuple[int, int] | None = 
     """A checked Camera: K 3x3 with positive focal lengths, 0, 4, 5 (or more, zero past the fifth)
     distortion coefficients."""
     K = np.asarray(K, dtype=np.float64).reshape(3, 3)
-    if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.all(np.isfinite(K)):
-        raise PosenetError(f"camera focal lengths must be positive and finite, got fx={K[0, 0]} fy={K[1, 1]}")
+    if not np.all(np.isfinite(K)):
+        raise PosenetError(f"camera intrinsics must be finite numbers, got fx={K[0, 0]} fy={K[1, 1]} "
+                           f"cx={K[0, 2]} cy={K[1, 2]}")  # fmt: skip
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise PosenetError(f"camera focal lengths must be positive, got fx={K[0, 0]} fy={K[1, 1]}")
     d = np.zeros(DIST_COEFFS)
     given = np.asarray(dist if dist is not None else [], dtype=np.float64).ravel()
+    if not np.all(np.isfinite(given)):
+        raise PosenetError(f"camera distortion must be finite numbers, got {given.tolist()}")
     if len(given) > DIST_COEFFS and np.any(given[DIST_COEFFS:] != 0):
         raise PosenetError(f"camera distortion: only OpenCV's 5 coefficients are supported, got {len(given)}")
     d[: min(len(given), DIST_COEFFS)] = given[:DIST_COEFFS]

@@ -21,7 +21,7 @@ import yaml
 from torch.utils.data import DataLoader
 from torchvision.models.detection import FCOS
 
-from posenet.checkpoint import load_checkpoint, save_checkpoint
+from posenet.checkpoint import save_checkpoint
 from posenet.data import EpochSampler
 from posenet.data.layout import split_scenes
 from posenet.detection.detect import box_scores, detect
@@ -44,6 +44,7 @@ from posenet.training.train import (
     make_optimizer,
     memory_format,
     pin_cpu_threads,
+    resumed_state,
     stop_step,
 )
 from scgen.io import ScgenError, atomic_write_text, first_missing
@@ -83,7 +84,7 @@ def _train(
         raise PosenetError(f"{len(train_set)} training images are fewer than one batch of {o.batch_size}")
     val = _val_images(data, cfg.obj_id)
     total = o.epochs * per_epoch
-    state = load_checkpoint(out / LAST, kind="detector") if resume else None
+    state = resumed_state(out, "detector") if resume else None
     if state is not None:  # a resumed run keeps the schedule it started with (a time budget's fitted one)
         total = int(state.get("schedule_steps") or total)
     stop = budget.total if budget else stop_step(total, max_steps, o.epochs, per_epoch, announce=True)

@@ -3,6 +3,7 @@ camera, the inputs and where each image's box comes from. A problem is one Posen
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,6 +64,8 @@ def parse_box(text: str) -> Box:
         x, y, w, h = (float(v) for v in text.split(","))
     except ValueError as exc:
         raise PosenetError(f"--box must be x,y,w,h (pixels), got '{text}'") from exc
+    if not all(map(math.isfinite, (x, y, w, h))):
+        raise PosenetError(f"--box must be x,y,w,h finite numbers (pixels), got '{text}'")
     if w <= 0 or h <= 0:
         raise PosenetError(f"--box width and height must be positive, got '{text}'")
     return x, y, w, h

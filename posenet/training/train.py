@@ -42,7 +42,14 @@ from posenet.training.budget import PROBE_STEPS, TimeBudget, run_budget
 from posenet.training.capture import Losses, compiled_losses, eager_losses
 from posenet.training.losses import LOSS_TERMS, PmObject
 from posenet.training.ranger import Ranger
-from scgen.io import ScgenError, atomic_write_text, check_output, first_missing, usable_cores
+from scgen.io import (
+    ScgenError,
+    atomic_write_text,
+    check_output,
+    first_missing,
+    remove_stale_temporaries,
+    usable_cores,
+)
 
 LOG_FILE = "train_log.jsonl"
 LAST = "last.pt"
@@ -382,7 +389,7 @@ def _set_up(
     _refuse(out, o, resume, world)
     dataset = open_split(data, "train", cfg.data, cfg.model_config(), train=True, seed=o.seed)
     clock.lap("data (scan, object model)")
-    state = load_checkpoint(out / LAST, kind="pose") if resume else None
+    state = resumed_state(out, "pose") if resume else None
     # a resumed run keeps the schedule it started with (a time budget's fitted one included)
     total = (state or {}).get("schedule_steps") or o.epochs * steps_per_epoch(len(dataset), o, world)
     sampler = EpochSampler(len(dataset), o.batch_size // world, world, rank, o.seed)
@@ -487,6 +494,15 @@ def _refuse(out: Path, o: OptimConfig, resume: bool, world: int) -> None:
     if o.compile and world > 1:
         raise PosenetError(f"optim.compile trains in one process, not {world} DDP processes")
     check_run_folder(out, resume)
+
+
+def resumed_state(out: Path, kind: str) -> dict[str, Any]:
+    """The run folder's checkpoint to resume (of `kind`: pose or detector), once read, with the
+    temporaries a killed write left beside it removed (`last.pt.tmp-PID`: the run that resumes is the
+    folder's only writer)."""
+    state = load_checkpoint(out / LAST, kind=kind)
+    remove_stale_temporaries(out)
+    return state
 
 
 def check_run_folder(out: Path, resume: bool) -> None:

@@ -26,7 +26,7 @@ def parse_ratios(text: str | Sequence[float]) -> tuple[float, float, float]:
         values = [float(x) for x in (text.split(",") if isinstance(text, str) else text)]
     except ValueError as exc:
         raise ScgenError(f"split ratios must be numbers, got '{text}'") from exc
-    if len(values) != 3 or any(v < 0 for v in values) or abs(sum(values) - 1.0) > 1e-6:
+    if len(values) != 3 or not all(0 <= v <= 1 for v in values) or not abs(sum(values) - 1.0) <= 1e-6:
         raise ScgenError(f"split ratios must be three non-negative numbers summing to 1, got '{text}'")
     return values[0], values[1], values[2]
 

@@ -13,10 +13,10 @@ parent). The names below are posenet's interface.
 
 from scgen.errors import ScgenError
 from scgen.io import bop
-from scgen.io.atomic import atomic_write_bytes, atomic_write_text
+from scgen.io.atomic import atomic_write_bytes, atomic_write_text, remove_stale_temporaries
 from scgen.io.bop import NOT_A_FOLDER, not_a_dataset
 from scgen.io.camera_presets import preset_intrinsics
-from scgen.io.cores import usable_cores
+from scgen.io.cores import physical_memory_bytes, usable_cores
 from scgen.io.exr import read_xyz_exr
 from scgen.io.image_file import read_image, why_unreadable
 from scgen.io.output_path import (
@@ -44,10 +44,12 @@ __all__ = [
     "load_yaml",
     "make_output_folder",
     "not_a_dataset",
+    "physical_memory_bytes",
     "preset_intrinsics",
     "read_image",
     "read_sequence_frames",
     "read_xyz_exr",
+    "remove_stale_temporaries",
     "usable_cores",
     "why_unreadable",
     "write_output",

@@ -12,6 +12,11 @@ import numpy as np
 
 BACKGROUND_ID = 0
 TARGET_ID = 1  # props get ids 2, 3, ... in SceneSpec.props order
+# What one sample holds at once, per pixel, at the least: the Buffers below (rgb 3, depth 4, instance 4,
+# target_depth 4, normal 12, sun_blocked 1 bytes), the linear radiance the camera stage starts from (12)
+# and the labels annotate makes of them (the xyz map 12, the two masks 2). A renderer holds more (its
+# own film and passes), so a frame this bound does not fit in memory cannot be rendered.
+SAMPLE_BYTES_PER_PIXEL = 3 + 4 + 4 + 4 + 12 + 1 + 12 + 12 + 2
 
 
 @dataclass(frozen=True)

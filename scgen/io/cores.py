@@ -1,4 +1,5 @@
-"""How many CPU cores this process may run on: the default count of workers and threads."""
+"""What this machine gives a process: how many CPU cores it may run on (the default count of workers and
+threads), and how much memory there is."""
 
 from __future__ import annotations
 
@@ -12,3 +13,11 @@ def usable_cores() -> int:
     if hasattr(os, "sched_getaffinity"):
         return max(1, len(os.sched_getaffinity(0)))
     return os.cpu_count() or 1
+
+
+def physical_memory_bytes() -> int | None:
+    """The machine's physical memory in bytes, None where the OS does not say (what no frame can exceed)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None

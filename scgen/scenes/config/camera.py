@@ -16,7 +16,7 @@ from typing import Any
 
 from scgen.errors import ScgenError
 from scgen.io.camera_presets import DEFAULT_INTRINSICS, preset_entry
-from scgen.scenes.config.checks import check_choice, check_positive, check_prob, check_range
+from scgen.scenes.config.checks import check_choice, check_positive, check_prob, check_range, is_number
 
 Range = tuple[float, float]  # [min, max], drawn uniformly per image
 
@@ -173,7 +173,7 @@ def scale_pixel_sizes(camera: dict[str, Any], s: float) -> None:
 
 def check_camera(cam: dict[str, Any]) -> None:
     """Every range and choice of the camera table (intrinsics are checked by config.resolve)."""
-    if len(cam["dist"]) != 5 or not all(isinstance(k, (int, float)) for k in cam["dist"]):
+    if len(cam["dist"]) != 5 or not all(map(is_number, cam["dist"])):
         raise ScgenError(f"camera.dist must be 5 numbers (k1, k2, p1, p2, k3), got {cam['dist']!r}")
     check_choice("camera.exposure.mode", cam["exposure"]["mode"], ("fixed", "range", "auto"))
     check_choice("camera.optics.psf", cam["optics"]["psf"], ("gaussian", "defocus"))

@@ -16,6 +16,8 @@ from typing import Any
 import yaml
 
 from scgen.errors import ScgenError
+from scgen.io.buffers import SAMPLE_BYTES_PER_PIXEL
+from scgen.io.cores import physical_memory_bytes
 from scgen.io.yaml_file import NUMBER_FORM, load_yaml
 from scgen.scenes.attitude import check_pose
 from scgen.scenes.config.camera import DEFAULT_CAMERA, camera_preset, check_camera, scale_pixel_sizes
@@ -237,14 +239,25 @@ def read_config_file(path: Path) -> dict[str, Any]:
     return data
 
 
+def check_frame_fits(width: int, height: int) -> None:
+    """Refuse, before any work, a frame whose one sample cannot fit in this machine's memory: at least
+    SAMPLE_BYTES_PER_PIXEL bytes a pixel (scgen.io.buffers; a renderer holds more)."""
+    memory = physical_memory_bytes()
+    need = width * height * SAMPLE_BYTES_PER_PIXEL
+    if memory is not None and need > memory:
+        raise ScgenError(f"a {width}x{height} frame needs at least {need / 2**30:.0f} GiB for one sample's "
+                         f"buffers and labels, more than the machine's {memory / 2**30:.0f} GiB")  # fmt: skip
+
+
 def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
     """Fill derived values (principal point, distance range) and check every range; returns cfg."""
     cam = cfg["camera"]
     for key in ("width", "height"):
         if not isinstance(cam[key], int) or cam[key] <= 0:
             raise ScgenError(f"camera.{key} must be a positive integer, got {cam[key]!r}")
-    if cam["fx"] <= 0 or cam["fy"] <= 0:
-        raise ScgenError(f"camera focal lengths must be positive, got fx={cam['fx']} fy={cam['fy']}")
+    check_frame_fits(cam["width"], cam["height"])
+    if not all(is_number(cam[k]) and cam[k] > 0 for k in ("fx", "fy")):
+        raise ScgenError(f"camera focal lengths must be positive numbers, got fx={cam['fx']} fy={cam['fy']}")
     for key, size in (("cx", "width"), ("cy", "height")):
         if cam[key] is not None and not is_number(cam[key]):
             raise ScgenError(f"camera.{key} must be a number, got {cam[key]!r}")
