@@ -13,7 +13,9 @@ Stages, each written to --json as soon as it is measured (a killed run keeps wha
      `train step (CONFIG, batch B, DEVICE, ...): X ms (Y samples/s)`, posenet_dataloader.py's form;
   3. the optimizer step alone on that model, timm's against posenet's (same gradients);
   4. `posenet train` itself for --train-steps steps: samples/s from its own log (loader waits included),
-     the first --skip steps (start-up, compilation) left out, on CUDA also with optim.compile (last); with
+     the first --skip steps (start-up, compilation) left out, on CUDA also with optim.compile and with
+     data.loader and optim.compile `auto` (last: what auto takes there, the packed cache and the compiled
+     step, beside the default per-sample eager run); with
      --against TREE (a checkout of another commit, e.g. `git worktree add /tmp/old 3a10b4b`), `posenet
      train --config CONFIG` from this tree and from TREE in --rounds alternating rounds (3), each with its
      own package's defaults (OpenMP waiting included: the children get no GOMP_SPINCOUNT or
@@ -363,6 +365,11 @@ def run(args: argparse.Namespace) -> None:
             cfg.optim.compile = True
             with tempfile.TemporaryDirectory() as tmp:
                 train_line(b, cfg, name + ", optim.compile", variant, Path(tmp) / "run")
+            # what `auto` takes on CUDA (the packed cache and the compiled step): the default-to-be
+            # (posenet.training.fast_path), beside the per-sample eager line above
+            cfg.data.loader, cfg.optim.compile = "auto", "auto"
+            with tempfile.TemporaryDirectory() as tmp:
+                train_line(b, cfg, name + ", data.loader and optim.compile auto", variant, Path(tmp) / "run")
     if args.against is not None and args.train_steps:
         against_line(b, config)
     print("\n".join(["", f"== throughput on {dev} ({config} config)", *b.res.lines]))
@@ -384,6 +391,7 @@ def train_line(b: Bench, cfg: TrainConfig, name: str, variant: str | None, run: 
         stage="posenet train",
         variant=variant,
         compiled=cfg.optim.compile,
+        loader=cfg.data.loader,
         ms=1000 * sec,
         samples_s=rate,
     )

@@ -34,7 +34,10 @@ from scgen.io import NUMBER_FORM, load_yaml
 
 AMP_MODES = ("auto", "off", "bf16", "fp16")  # optim.amp: posenet.training.amp resolves them
 AUGMENTS = ("paper", "spnv2", "gdrnet-occlusion")  # data.augment: posenet.data.photometric's chains
-LOADERS = ("samples", "cache")  # data.loader: per-sample workers, or the packed cache with batch augmentation
+# data.loader: per-sample workers, the packed cache with batch augmentation, or auto (posenet.training.
+# fast_path: the cache on CUDA, where it was built for, the per-sample workers elsewhere)
+LOADERS = ("samples", "cache", "auto")
+AUTO = "auto"  # data.loader's and optim.compile's: decided by the device a run trains on
 # what a value of each field type looks like in a config file, for the message of a wrongly typed one
 EXPECTED_FORM = {float: NUMBER_FORM, int: "a whole number such as 8", bool: "true or false", str: "a string"}
 
@@ -69,7 +72,9 @@ class DataConfig:
     workers: int = 4
     # samples: each worker decodes and augments whole samples (posenet.data.dataset); cache: a packed
     # cache decoded once under DATA/.posenet_cache, the crop, background and colour applied to the whole
-    # batch on the training device (posenet.data.cache, batch_augment; augment 'paper', no truncate_fg)
+    # batch on the training device (posenet.data.cache, batch_augment; augment 'paper', no truncate_fg);
+    # auto: the cache on CUDA, samples elsewhere (posenet.training.fast_path). samples stays the default
+    # until benchmarks/gpu_check.sh has measured auto on a GPU (docs/posenet.md)
     loader: str = "samples"
     # > 0: train on this many images of the train split, the first of one fixed shuffled order, so that a
     # smaller set lies inside a larger one (accuracy against data: benchmarks/figures/posenet_data_curve.py)
@@ -118,8 +123,9 @@ class OptimConfig:
     # weight decay on norm weights and biases too, as Ranger does; False: timm's no-decay group for them
     decay_norms_biases: bool = False
     # the step's forward and losses through torch.compile (posenet.training.capture): on CUDA as CUDA graphs
-    # (mode reduce-overhead), for a GPU that idles between eager mode's kernel launches; one process only
-    compile: bool = False
+    # (mode reduce-overhead), for a GPU that idles between eager mode's kernel launches; one process only;
+    # auto: compiled on CUDA in one process, eager elsewhere (posenet.training.fast_path)
+    compile: bool | str = False
 
 
 @dataclass
@@ -232,6 +238,9 @@ def override_fields(section: Any, values: Any, name: str) -> Any:
         if key not in fields:
             raise PosenetError(f"unknown config key '{name}.{key}'")
         default = getattr(section, key)
+        if value == AUTO and "bool | str" in str(fields[key].type):  # a switch left to the device
+            out[key] = value
+            continue
         if value is None and "None" in str(fields[key].type):  # an optional field set to null
             out[key] = None
             continue
@@ -269,6 +278,8 @@ def _validate(cfg: TrainConfig) -> None:
         raise PosenetError(f"data.augment must be one of {', '.join(AUGMENTS)}, got {d.augment!r}")
     if d.loader not in LOADERS:
         raise PosenetError(f"data.loader must be one of {', '.join(LOADERS)}, got {d.loader!r}")
+    if o.compile not in (True, False, AUTO):
+        raise PosenetError(f"optim.compile must be true, false or {AUTO!r}, got {o.compile!r}")
     if d.loader == "cache" and (d.augment != "paper" or d.truncate_fg):
         raise PosenetError(
             "data.loader 'cache' applies the paper's augmentations only (data.augment 'paper', "

@@ -40,6 +40,7 @@ from posenet.models import PoseNet, create_model
 from posenet.training.amp import Precision
 from posenet.training.budget import PROBE_STEPS, TimeBudget, run_budget
 from posenet.training.capture import Losses, compiled_losses, eager_losses
+from posenet.training.fast_path import resolve_fast_paths
 from posenet.training.losses import LOSS_TERMS, PmObject
 from posenet.training.ranger import Ranger
 from scgen.io import (
@@ -384,6 +385,7 @@ def _set_up(
     """Refuse a bad request, then open the data and build the seeded model, optimizer and loader
     (resumed from OUT/last.pt with `resume`); nothing is written. With a `budget`, the schedule's total
     is the budget's, refitted as the run goes."""
+    cfg, paths = resolve_fast_paths(cfg, device, world)
     o = cfg.optim
     clock = StartUp()
     _refuse(out, o, resume, world)
@@ -408,6 +410,7 @@ def _set_up(
         for line in summary_lines(data, cfg, len(dataset), sampler.steps_per_epoch, total, step, stop, device,
                                   precision, world, budget, workers):  # fmt: skip
             tqdm.write(line)
+        tqdm.write(paths)
     run = _Run(
         cfg=cfg,
         model=model,
