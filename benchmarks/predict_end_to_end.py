@@ -14,7 +14,7 @@ ground-truth boxes. predict's own images per second (the batch, model loading ex
 output. With --scale S the user's copies are the images resized S times (bicubic) with camera.json's
 intrinsics scaled alike (posenet.data.camera.resized): a user camera of S times the size, which
 predict warps back into the training camera; the labels and the poses do not change. --passes N runs
-predict and eval at N passes alike (default: predict's, posenet.predict.recrop.PREDICT_PASSES; the
+predict and eval at N passes alike (default: predict's, posenet.predict.options.PREDICT_PASSES; the
 figures of issue 50 were at 1).
 Writes OUT/report.json and prints one table. The goal of issue 50: ADD@0.1d at detected boxes within 3
 points of that at ground-truth boxes, and >= 30 images/s at 640x480 through ONNX on 2 cores.
@@ -44,7 +44,7 @@ from posenet.data.layout import Instance, scan_split
 from posenet.detection.detect import iou
 from posenet.errors import PosenetError
 from posenet.evaluation.metrics import sample_errors, summarise
-from posenet.predict.recrop import PREDICT_PASSES
+from posenet.predict.options import PREDICT_PASSES
 from scgen.io import bop
 
 POSENET = [sys.executable, "-m", "posenet.cli"]

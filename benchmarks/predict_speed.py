@@ -49,8 +49,8 @@ from posenet.data.camera import read_camera_file
 from posenet.errors import PosenetError
 from posenet.models import create_model
 from posenet.predict.batch import BatchPredictor
+from posenet.predict.options import PREDICT_PASSES
 from posenet.predict.predictor import Predictor
-from posenet.predict.recrop import PREDICT_PASSES
 
 KEEP = ("model", "model_config", "config", "step", "object", "camera")  # what predict and export read
 

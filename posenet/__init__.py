@@ -22,7 +22,7 @@ OPENMP_WAITING = ("GOMP_SPINCOUNT", "OMP_WAIT_POLICY")
 if "OMP_WAIT_POLICY" not in os.environ:  # a user's wait policy stands, as does a user's spin count
     os.environ.setdefault("GOMP_SPINCOUNT", "1000")  # libgomp's own count for an oversubscribed machine
 
-# the `posenet` command's imports (torch, timm), timed by posenet.console: a training run's first seconds
+# `posenet train`'s imports (torch, timm), timed by the command (posenet.cli): a training run's first seconds
 IMPORT_SECONDS: float | None = None
 
 # the facade: attribute -> the module that defines it

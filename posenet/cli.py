@@ -4,53 +4,31 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 import click
-import cv2
-import torch
-from tqdm import tqdm
 
+import posenet
 from clishell.group import OneLineErrorGroup
 from clishell.types import FiniteFloatRange
-from posenet.checkpoint import load_checkpoint, load_model
 from posenet.config import AMP_MODES, config_from_dict, load_config
-from posenet.data.boxes import boxes_from_gt
-from posenet.data.layout import scan_split
-from posenet.detection.detect import MIN_SCORE, detect_split, detection_entries
-from posenet.detection.detector import load_detector_config
-from posenet.detection.train import BEST, train_detector
+from posenet.detection.options import MIN_SCORE
 from posenet.doctor import check_config_packages
 from posenet.errors import PosenetError
-from posenet.evaluation.calibration import CALIBRATION_SPLIT, calibrate_noise
-from posenet.evaluation.evaluate import (
-    BATCH_SIZE,
-    by_factor_table,
-    evaluate_pnp,
-    format_table,
-    json_record,
-    summary_rows,
-)
-from posenet.evaluation.evaluate import by_factor as run_by_factor
-from posenet.evaluation.navigation import NAVIGATION_LEGEND, navigate_split, navigation_table
-from posenet.evaluation.sequences import per_sequence, sequence_table
-from posenet.evaluation.viz import heatmap_panel, overlay_panel
-from posenet.export.bench import PAPER, device_label, format_report, resolve_device, run_bench
+from posenet.evaluation.options import BATCH_SIZE, CALIBRATION_SPLIT
 from posenet.models import VARIANTS
-from posenet.navigation.filter import NavConfig
-from posenet.navigation.noise import noise_path
-from posenet.predict.batch import BatchPredictor
-from posenet.predict.confidence import LOW_CONFIDENCE
-from posenet.predict.inputs import predict_inputs
-from posenet.predict.ransac import PNP_LABELS, PNP_METHODS
-from posenet.predict.recrop import PREDICT_PASSES
-from posenet.predict.run import FORMATS as PREDICT_FORMATS
-from posenet.predict.run import run_predict
-from posenet.training.train import train as run_train
-from scgen.io import bop, check_output, make_output_folder, preset_intrinsics, write_output
+from posenet.navigation.config import NavConfig
+from posenet.predict.options import FORMATS as PREDICT_FORMATS
+from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES
+from scgen.io import check_output, make_output_folder, preset_intrinsics, write_output
+
+# Building this command line and answering --help load nothing heavier than the modules above: torch,
+# timm, torchvision, OpenCV and the networks are imported inside each command, when it runs (a mistyped
+# option answers at once; tests/test_cli_startup.py holds it).
 
 PATH = click.Path(path_type=Path)
 
@@ -77,7 +55,7 @@ def passes_option(default: int, why: str) -> Callable[[Callable[..., Any]], Call
 
 
 def filter_options(command: Callable[..., Any]) -> Callable[..., Any]:
-    """eval's and predict's settings of the navigation filter (posenet.navigation.filter.NavConfig); the
+    """eval's and predict's settings of the navigation filter (posenet.navigation.config.NavConfig); the
     process noise is in diameters of the target, so one default fits any model scale."""
     defaults = NavConfig()
     for name, attr, text in (
@@ -143,6 +121,10 @@ def train(
     amp: str | None,
 ) -> None:
     """Train on the dataset's train split (under torchrun: DDP over the processes)."""
+    tic = time.perf_counter()
+    from posenet.training.train import train as run_train
+
+    posenet.IMPORT_SECONDS = time.perf_counter() - tic  # printed in train's start-up line
     if config is None:
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "paper"
@@ -222,6 +204,19 @@ def eval_cmd(
     `sequences`), and, where the checkpoint's noise is calibrated (posenet calibrate), the navigation
     filter's and smoother's figures beside the per-frame ones (--json: `navigation`).
     """
+    from posenet.checkpoint import load_checkpoint
+    from posenet.evaluation.evaluate import by_factor as run_by_factor
+    from posenet.evaluation.evaluate import (
+        by_factor_table,
+        evaluate_pnp,
+        format_table,
+        json_record,
+        summary_rows,
+    )
+    from posenet.evaluation.sequences import per_sequence, sequence_table
+    from posenet.predict.ransac import PNP_LABELS, PNP_METHODS
+    from scgen.io import bop
+
     methods = PNP_METHODS if pnp == "both" else (pnp,)
     if bop_csv is not None and len(methods) > 1:
         raise PosenetError("--bop-csv writes the estimates of one PnP method: --pnp patch or --pnp ransac")
@@ -302,6 +297,9 @@ def train_detector_cmd(
     whole object's box clipped to the image (bbox_obj, amodal; the cpu, light and paper presets), or `arch:
     mask-timm` on the object's mask (`mask`; the box is its extent). Backbones start from ImageNet
     (`pretrained:` imagenet, package, a local file or null)."""
+    from posenet.detection.detector import load_detector_config
+    from posenet.detection.train import BEST, train_detector
+
     if config is None:
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "cpu"
@@ -338,6 +336,9 @@ def boxes(
     """Write one box per image of a split: the detector's (misses recorded), else the GT full-object boxes,
     optionally perturbed. Every kind is the box the pose network is cropped around, bbox_obj (the whole
     object's box): exact (it may reach past the image), perturbed or detected (clipped to the image)."""
+    from posenet.data.boxes import boxes_from_gt
+    from posenet.data.layout import scan_split
+
     check_output(out, folder=False, overwrite=overwrite)
     if detector is not None and noise > 0:
         raise PosenetError("--noise perturbs the ground-truth boxes: it takes no --detector")
@@ -350,6 +351,10 @@ def boxes(
             else "ground-truth bbox_obj (the whole object's box; it may reach past the image)"
         )
     else:
+        import torch
+
+        from posenet.detection.detect import detect_split, detection_entries
+
         device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
         _, dets, _ = detect_split(detector, data, split, obj_id, device)
         entries = detection_entries(dets, obj_id, f"detector:{detector}")
@@ -391,6 +396,10 @@ def bench(
 ) -> None:
     """Params, MACs and batch-1 latency / FPS of the pose-network variants (architecture only, random
     init: no weights needed); with --onnx, onnxruntime's latency beside torch's."""
+    import torch
+
+    from posenet.export.bench import PAPER, device_label, format_report, resolve_device, run_bench
+
     if json_path:
         check_output(json_path, folder=False, overwrite=overwrite)
     if threads:
@@ -417,12 +426,11 @@ def export_cmd(
     xyz, region, rot6d, site. Checks onnxruntime's outputs against torch's on a random batch of 2. With
     --detector, also the detector's best box and score for one image of the pose network's training camera
     (what `posenet predict --onnx POSE.onnx --detector DET.onnx` runs)."""
-    from posenet.export.onnx_export import (  # ~0.6 s: only here
-        OPSET,
-        export_onnx,
-        max_difference,
-        onnx_session,
-    )
+    import torch
+    from tqdm import tqdm
+
+    from posenet.checkpoint import load_model
+    from posenet.export.onnx_export import OPSET, export_onnx, max_difference, onnx_session
 
     if (detector is None) != (detector_onnx is None):
         raise PosenetError("--detector and --detector-onnx go together")
@@ -445,6 +453,8 @@ def export_cmd(
 
 def export_detector_graph(detector: Path, path: Path, pose_state: dict, ckpt: Path) -> None:
     """The detector's DetectorBestBox graph at the size of the pose checkpoint's training camera."""
+    import torch
+
     from posenet.detection.detect import load_detector
     from posenet.export.onnx_export import export_detector_onnx
 
@@ -460,6 +470,10 @@ def export_detector_graph(detector: Path, path: Path, pose_state: dict, ckpt: Pa
 def navigation_summary(data: Path, split: str, ckpt: Path, result: Any, config: NavConfig) -> None:
     """eval's navigation table on a sequence split (per frame, filtered, smoothed), into the summary; a
     line saying how to get it where the checkpoint's noise is not calibrated."""
+    from posenet.evaluation.evaluate import format_table
+    from posenet.evaluation.navigation import NAVIGATION_LEGEND, navigate_split, navigation_table
+    from posenet.navigation.noise import noise_path
+
     if not noise_path(ckpt).is_file():
         click.echo(f"navigation: calibrate the checkpoint's noise for the filtered and smoothed figures "
                    f"(posenet calibrate --data DATASET --ckpt {ckpt})")  # fmt: skip
@@ -516,6 +530,10 @@ def calibrate(
     (robust: turned poses and lost boxes are the filter's gate's to reject), and along labelled sequences
     (--sequences) how much of an error persists from frame to frame and how long. Writes CKPT's stem +
     .noise.json beside it, which posenet predict --track and posenet eval read (docs/navigation.md)."""
+    from posenet.checkpoint import load_checkpoint
+    from posenet.evaluation.calibration import calibrate_noise
+    from posenet.navigation.noise import noise_path
+
     load_checkpoint(ckpt, kind="pose")
     out = noise_path(ckpt)
     check_output(out, folder=False, overwrite=True)
@@ -546,6 +564,12 @@ def viz(
     data: Path, ckpts: tuple[Path, ...], samples: str | None, split: str, out: Path, overwrite: bool
 ) -> None:
     """Pose overlays (predicted green vs GT white contour) and feature-response heat maps, as PNGs."""
+    import cv2
+
+    from posenet.checkpoint import load_checkpoint
+    from posenet.data.layout import scan_split
+    from posenet.evaluation.viz import heatmap_panel, overlay_panel
+
     check_output(out, folder=True, overwrite=overwrite)
     states = [load_checkpoint(c, kind="pose") for c in ckpts]
     if samples is None:
@@ -682,6 +706,13 @@ def predict(
     --split S). Each image is warped into the camera the network was trained with (lens, focal length and
     size: docs/posenet.md), boxed by --detector (or --box / --boxes; with --data and neither, the
     ground-truth boxes, as posenet eval), cropped, and its pose decoded in the user's camera."""
+    from tqdm import tqdm
+
+    from posenet.export.bench import resolve_device
+    from posenet.predict.batch import BatchPredictor
+    from posenet.predict.inputs import predict_inputs
+    from posenet.predict.run import run_predict
+
     check_output(out, folder=True, overwrite=overwrite)
     if batch > 1 and (track or filtered):
         raise PosenetError("the navigation filter takes the frames one after another: --track and --filter "

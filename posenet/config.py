@@ -29,7 +29,7 @@ import yaml
 
 from posenet.errors import PosenetError
 from posenet.models import PRESETS, ModelConfig
-from posenet.models.backbone import IMAGENET, PACKAGE
+from posenet.models.config import IMAGENET, PACKAGE
 from scgen.io import NUMBER_FORM, load_yaml
 
 AMP_MODES = ("auto", "off", "bf16", "fp16")  # optim.amp: posenet.training.amp resolves them

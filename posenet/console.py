@@ -8,9 +8,6 @@ selects it (posenet.doctor.check_config_packages), so a node without it runs eve
 
 from __future__ import annotations
 
-import time
-
-import posenet
 from clishell.group import exit_with
 from posenet.doctor import INSTALL_HINT, missing_training_modules
 from posenet.errors import PosenetError
@@ -20,8 +17,6 @@ def main() -> None:
     missing = missing_training_modules()
     if missing:
         exit_with(PosenetError(f"posenet needs {', '.join(missing)}, not installed here: {INSTALL_HINT}"))
-    tic = time.perf_counter()
     from posenet.cli import main as cli
 
-    posenet.IMPORT_SECONDS = time.perf_counter() - tic  # printed in train's start-up line
     cli()

@@ -54,7 +54,8 @@ def train_weights() -> tuple[str, str, str]:
     if any(importlib.util.find_spec(name) is None for name in ("torch", "timm")):
         return "warn", "not checked: posenet needs torch and timm", INSTALL_HINT
     from posenet.config import TrainConfig
-    from posenet.models.backbone import IMAGENET, PACKAGE, shipped_weights_file, timm_weights
+    from posenet.models.backbone import shipped_weights_file, timm_weights
+    from posenet.models.config import IMAGENET, PACKAGE
 
     cfg = TrainConfig()
     model = cfg.model_config()

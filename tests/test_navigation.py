@@ -19,18 +19,10 @@ from navigation_helpers import (
 )
 from scipy.stats import chi2
 
+from posenet.navigation.config import NavConfig
 from posenet.navigation.dynamics import MAX_TURN_RAD, AttitudeModel, TranslationModel
 from posenet.navigation.estimate import OMEGA, ROT, VEL, T, camera_estimate, output_jacobian
-from posenet.navigation.filter import (
-    ATT,
-    DIM,
-    POS,
-    CameraFrames,
-    Measurement,
-    NavConfig,
-    NavState,
-    PoseFilter,
-)
+from posenet.navigation.filter import ATT, DIM, POS, CameraFrames, Measurement, NavState, PoseFilter
 from posenet.navigation.noise import (
     Errors,
     NoiseModel,

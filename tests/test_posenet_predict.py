@@ -28,8 +28,8 @@ from posenet.errors import PosenetError
 from posenet.evaluation.evaluate import evaluate
 from posenet.predict import Pose, Predictor, make_camera
 from posenet.predict.batch import BatchPredictor
+from posenet.predict.options import PREDICT_PASSES
 from posenet.predict.overlay import LABEL_MARGIN, draw_label, label_style
-from posenet.predict.recrop import PREDICT_PASSES
 from scgen.generator import Generator
 from scgen.io import bop
 from scgen.run.runner import RenderJob, run_render

@@ -54,8 +54,7 @@ from posenet.evaluation.navigation import (
     sequence_keys,
 )
 from posenet.navigation.so3 import log
-from posenet.predict.confidence import LOW_CONFIDENCE
-from posenet.predict.recrop import PREDICT_PASSES
+from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES
 from scgen.io import read_sequence_frames
 
 POSENET = [sys.executable, "-m", "posenet.cli"]

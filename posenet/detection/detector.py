@@ -37,7 +37,8 @@ from posenet.data.io import read_bgr, read_mask
 from posenet.data.layout import Instance, scan_split
 from posenet.detection.segmenter import MaskDetector
 from posenet.errors import PosenetError
-from posenet.models.backbone import IMAGENET, PACKAGE, initial_weights, input_mean_std, timm_features
+from posenet.models.backbone import initial_weights, input_mean_std, timm_features
+from posenet.models.config import IMAGENET, PACKAGE
 
 ALIASES = {"smoke": "cpu"}
 ARCHS = ("mask-timm", "fcos-timm-fpn", "fcos-resnet50-fpn")

@@ -25,13 +25,12 @@ from posenet.data.object_model import load_object_model
 from posenet.errors import PosenetError
 from posenet.evaluation.evaluate import evaluate
 from posenet.evaluation.navigation import nearest_twin
+from posenet.evaluation.options import CALIBRATION_SPLIT
 from posenet.navigation.noise import Errors, NoiseModel, calibrate, with_persistence
 from posenet.navigation.so3 import log
-from posenet.predict.confidence import LOW_CONFIDENCE
-from posenet.predict.recrop import PREDICT_PASSES
+from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES
 from scgen.io import SequenceFrame, read_sequence_frames
 
-CALIBRATION_SPLIT = "val"
 Key = tuple[int, int]
 
 

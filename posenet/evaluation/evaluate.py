@@ -31,6 +31,7 @@ from posenet.data.dataset import PoseDataset
 from posenet.data.object_model import ObjectModel
 from posenet.errors import PosenetError
 from posenet.evaluation.metrics import TURNED_DEG, headline_add, sample_errors, summarise
+from posenet.evaluation.options import BATCH_SIZE
 from posenet.export.bench import dummy_inputs, measure_latency_ms
 from posenet.geometry import decode_pose
 from posenet.models import PoseNet
@@ -38,7 +39,6 @@ from posenet.predict.confidence import batch_confidences
 from posenet.predict.ransac import PNP_LABELS, ransac_poses
 from posenet.predict.recrop import box_iou, model_box
 
-BATCH_SIZE = 32
 LATENCY_WARMUP = 5  # untimed batch-1 forwards (allocator, cuDNN autotuning)
 LATENCY_ITERS = 20  # timed ones; the latency is their median
 

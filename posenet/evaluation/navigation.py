@@ -33,8 +33,9 @@ from posenet.config import config_from_dict
 from posenet.data.layout import scan_split
 from posenet.data.object_model import ObjectModel, load_object_model
 from posenet.evaluation.metrics import add_error, adds_error
+from posenet.navigation.config import NavConfig
 from posenet.navigation.estimate import OMEGA, ROT, VEL, Estimate, T, camera_estimate
-from posenet.navigation.filter import NavConfig, NavState, Step
+from posenet.navigation.filter import NavState, Step
 from posenet.navigation.noise import NoiseModel, measurement, require_noise
 from posenet.navigation.scene import TargetBody, make_filter, sequence_frames, target_body
 from posenet.navigation.smoother import smooth

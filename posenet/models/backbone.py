@@ -23,9 +23,8 @@ from timm.layers import LayerNorm2d
 from torch import Tensor, nn
 
 from posenet.errors import PosenetError
+from posenet.models.config import IMAGENET, PACKAGE
 
-IMAGENET = "imagenet"
-PACKAGE = "package"
 # features-only models drop the classifier head, and timm logs each dropped key of a weights file as a warning
 logging.getLogger("timm.models._builder").setLevel(logging.ERROR)
 

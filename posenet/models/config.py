@@ -8,10 +8,12 @@ import typing
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-import timm
-
 from posenet.errors import PosenetError
-from posenet.models.layers import NORMS
+
+# this module holds no torch or timm import: the command lines' help reads its vocabularies
+NORMS = ("gn", "bn")  # the geometric head's norms (posenet.models.layers.norm2d)
+IMAGENET = "imagenet"  # `pretrained`: timm's ImageNet weights, downloaded (posenet.models.backbone)
+PACKAGE = "package"  # `pretrained`: the ImageNet weights a registry package ships, no download
 
 
 class Variant(NamedTuple):
@@ -116,6 +118,8 @@ class ModelConfig:
                 f"ggca={self.ggca}, mecs={self.mecs}, pgsa={self.pgsa} is not variant {self.variant!r} "
                 "(the variant sets the modules; choose the variant that has them)"
             )
+        import timm  # ~2 s to import: only when a configuration is checked
+
         if not timm.is_model(self.backbone):
             raise PosenetError(f"unknown backbone {self.backbone!r}: not a timm model name")
 

@@ -6,8 +6,6 @@ import math
 
 from torch import nn
 
-NORMS = ("gn", "bn")
-
 
 def norm2d(kind: str, channels: int) -> nn.Module:
     """'gn': GroupNorm with 32 groups, or fewer when the width is not a multiple of 32 (GDR-Net's Patch-PnP

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from posenet.navigation.filter import CAMERA, CameraFrames, MeasurementBias, NavConfig, PoseFilter
+from posenet.navigation.config import NavConfig
+from posenet.navigation.filter import CAMERA, CameraFrames, MeasurementBias, PoseFilter
 from scgen.io import ScgenError, SequenceFrame
 from scgen.scenes.motion.orbit import R_EARTH, lvlh_to_inertial, mean_motion
 from scgen.scenes.motion.tumble import mass_properties, quats_to_matrices

@@ -14,10 +14,6 @@ from posenet.data.camera import Camera, project
 from posenet.geometry import mask_probability
 from posenet.predict.ransac import MIN_POINTS, correspondences
 
-# below: the pose is flagged low_confidence, and the navigation filter takes it for no measurement (on
-# held-out sequences those are the frames in eclipse, where the network gives its prior's guess)
-LOW_CONFIDENCE = 0.5
-
 
 def pose_confidence(
     xyz: np.ndarray,

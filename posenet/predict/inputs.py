@@ -14,10 +14,10 @@ import torch
 from posenet.data.boxes import read_boxes, read_misses
 from posenet.data.camera import Camera, make_camera, parse_inline, read_camera_file
 from posenet.errors import PosenetError
-from posenet.navigation.filter import NavConfig
+from posenet.navigation.config import NavConfig
 from posenet.navigation.noise import NoiseModel, require_noise
+from posenet.predict.options import PREDICT_PASSES
 from posenet.predict.predictor import Box, Predictor
-from posenet.predict.recrop import PREDICT_PASSES
 from posenet.predict.run import MISS
 from posenet.predict.sources import Frame, dataset_frames, read_frames, resolve_source
 from posenet.predict.track import Tracker

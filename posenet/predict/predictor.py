@@ -35,11 +35,13 @@ from posenet.data.crop import roi_from_box
 from posenet.data.dataset import image_tensor, roi_geometry, roi_image
 from posenet.data.layout import image_size, scan_split
 from posenet.data.object_model import ObjectModel, load_object_model, object_from_record
+from posenet.detection.options import MIN_SCORE
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose, mask_probability
-from posenet.predict.confidence import LOW_CONFIDENCE, pose_confidence
+from posenet.predict.confidence import pose_confidence
+from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES
 from posenet.predict.pixels import to_bgr8
-from posenet.predict.recrop import PREDICT_PASSES, model_box
+from posenet.predict.recrop import model_box
 
 FLAGS = ("no_detection", "behind_camera", "outside_view", "low_confidence")
 STAGES = ("decode", "detector", "crop", "pose_network", "solve", "drawing")  # timed per image (ms)
@@ -161,10 +163,9 @@ class Predictor:
         graph, runs in onnxruntime instead of torch (the checkpoint still gives the object and camera). A
         checkpoint written before predict existed has no object or camera: `data`, the dataset it was
         trained on, supplies them. A detection scoring under `min_score` (None: the detector's floor,
-        posenet.detection.detect.MIN_SCORE) is no detection. `passes`: the network's runs per image, each
+        posenet.detection.options.MIN_SCORE) is no detection. `passes`: the network's runs per image, each
         after the first re-cropped around the model's box at the pose before (posenet.predict.recrop; the
         default, PREDICT_PASSES, measured there)."""
-        from posenet.detection.detect import MIN_SCORE  # torchvision's FCOS: only when asked for
 
         dev = torch.device(device)
         state = load_checkpoint(ckpt, kind="pose")

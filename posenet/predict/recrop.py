@@ -16,13 +16,6 @@ from posenet.data.boxes import Box, clip_box
 from posenet.data.camera import Camera, project
 from posenet.data.object_model import ObjectModel
 
-# Pose-network runs per image in `posenet predict` and the Python Predictor: the box, then one re-crop.
-# On 1,600 held-out corridor images the second pass beat the first from every box (the true one, noisy
-# ones at IoU 0.5-0.8, two detectors') with the 40-minute network, and a third added nothing beyond the
-# paired error (docs/benchmarks.md, "The sweep with a stronger network"). `posenet eval` stays at 1 pass,
-# the protocol of the paper's tables, unless --passes says otherwise.
-PREDICT_PASSES = 2
-
 
 def projected_box(vertices: np.ndarray, R: np.ndarray, t: np.ndarray, camera: Camera) -> Box | None:
     """`bbox_obj` of the model (`vertices`, N x 3, metres) at pose (R, t) seen by `camera`: the pixel

@@ -34,7 +34,6 @@ from posenet.predict.sources import Frame, load_frame
 from posenet.predict.track import Tracker, estimate_json
 from scgen.io import SequenceFrame, atomic_write_bytes, atomic_write_text, bop
 
-FORMATS = ("bop", "speedplus")
 MISS = "miss"  # a box file's entry for an image where its detector found nothing
 PREDICTIONS_FILE = "predictions.jsonl"
 SHEET_TILES = 8

@@ -28,12 +28,13 @@ from typing import Any
 import numpy as np
 
 from posenet.data.camera import Camera, make_camera
+from posenet.navigation.config import NavConfig
 from posenet.navigation.estimate import OMEGA, ROT, VEL, Estimate, T, camera_estimate
-from posenet.navigation.filter import CAMERA, POS, CameraFrames, NavConfig, NavState, PoseFilter, Step
+from posenet.navigation.filter import CAMERA, POS, CameraFrames, NavState, PoseFilter, Step
 from posenet.navigation.noise import NoiseModel, measurement, require_noise
 from posenet.navigation.scene import make_filter, target_body
 from posenet.navigation.smoother import smooth
-from posenet.predict.confidence import LOW_CONFIDENCE
+from posenet.predict.options import LOW_CONFIDENCE
 from posenet.predict.predictor import Box, Pose, Predictor
 from posenet.predict.recrop import in_view, model_box
 from scgen.io import SequenceFrame

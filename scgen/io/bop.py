@@ -10,13 +10,15 @@ import json
 from collections import Counter
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import trimesh
 
 from scgen.errors import ScgenError
 from scgen.io.image_file import read_image
+
+if TYPE_CHECKING:  # trimesh loads in ~0.6 s: the command lines' help imports this module
+    import trimesh
 
 MM_PER_M = 1000.0
 DIST_KEYS = ("k1", "k2", "p1", "p2", "k3")  # scene_camera.json's cam_dist: OpenCV's lens order (scenes.lens)
@@ -257,6 +259,8 @@ def read_models_info(root: Path) -> dict[str, Any]:
 
 def read_model_mesh(root: Path, obj_id: int, models_dir: str = MODELS_DIR) -> trimesh.Trimesh:
     """The object's PLY model (of MODELS_DIR or MODELS_EVAL_DIR), in metres."""
+    import trimesh
+
     path = Path(root) / models_dir / model_file(obj_id)
     try:
         mesh = trimesh.load(str(path), force="mesh", process=False)

@@ -8,16 +8,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
 
-from scgen.dataset.bop_dataset import BopImage, open_bop_dataset
 from scgen.dataset.layout import OBJ_ID, TARGET_INSTANCE, Layout, open_dataset, read_metadata
 from scgen.errors import ScgenError
 from scgen.io import bop
 from scgen.io.image_file import read_image, why_unreadable
+
+if TYPE_CHECKING:
+    from scgen.dataset.bop_dataset import BopImage
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,9 @@ class Source:
 def read_source(root: str | Path, progress: bool = False) -> Source:
     """Every sample of a finished scgen dataset, each image decoded once; a one-line ScgenError when
     `root` is not one, or names a file it cannot read."""
+    # imported here: the command lines' help loads the export registry, and the BOP reader pulls scipy
+    from scgen.dataset.bop_dataset import open_bop_dataset
+
     layout, manifest = open_dataset(root)
     rows = read_metadata(root)
     data = open_bop_dataset(layout.root)
