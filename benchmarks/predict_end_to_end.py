@@ -3,7 +3,7 @@ against the labels they came with, beside posenet eval at ground-truth boxes on 
 
     python benchmarks/predict_end_to_end.py --pose RUN/last.pt --detector DET/best.pt \\
         --data HELD_OUT_CORRIDOR --data HELD_OUT_DEFAULT --out /tmp/e2e [--split test] [--scale 2] \\
-        [--passes 2]
+        [--passes 2] [--same-crop-iou G]
 
 For each --data (a scgen render the checkpoints were not trained on), the images of its split that show
 the object are copied, renamed, into OUT/NAME/input with the dataset's camera.json and nothing else; then
@@ -15,7 +15,12 @@ output. With --scale S the user's copies are the images resized S times (bicubic
 intrinsics scaled alike (posenet.data.camera.resized): a user camera of S times the size, which
 predict warps back into the training camera; the labels and the poses do not change. --passes N runs
 predict and eval at N passes alike (default: predict's, posenet.predict.options.PREDICT_PASSES; the
-figures of issue 50 were at 1).
+figures of issue 50 were at 1), and --same-crop-iou G gates the passes after the first alike (default:
+predict's, SAME_CROP_IOU; 1 runs every pass).
+--passes-table instead runs only onnxruntime's predict, at its defaults and at --passes 1 and --passes 2
+--same-crop-iou 1 (every second pass), in turn for --rounds rounds, and prints each setting's median
+images/s beside its ADD@0.1d (issue 80: the default's speed and accuracy against the two it sits
+between); OUT/passes.json.
 Writes OUT/report.json and prints one table. The goal of issue 50: ADD@0.1d at detected boxes within 3
 points of that at ground-truth boxes, and >= 30 images/s at 640x480 through ONNX on 2 cores.
 """
@@ -26,6 +31,7 @@ import argparse
 import json
 import re
 import shutil
+import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -44,7 +50,7 @@ from posenet.data.layout import Instance, scan_split
 from posenet.detection.detect import iou
 from posenet.errors import PosenetError
 from posenet.evaluation.metrics import sample_errors, summarise
-from posenet.predict.options import PREDICT_PASSES
+from posenet.predict.options import PREDICT_PASSES, SAME_CROP_IOU
 from scgen.io import bop
 
 POSENET = [sys.executable, "-m", "posenet.cli"]
@@ -132,12 +138,16 @@ def one_dataset(data: Path, out: Path, args: argparse.Namespace, onnx: tuple[Pat
         "--overwrite",
         "--passes",
         args.passes,
+        "--same-crop-iou",
+        args.same_crop_iou,
     ]
     torch_out, torch_rate = run_predict([*common, "--detector", args.detector, "--out", out / "torch"])
     onnx_out, onnx_rate = run_predict(
         [*common, "--detector", onnx[1], "--onnx", onnx[0], "--out", out / "onnx"]
     )
-    gt = evaluate(data, args.pose, args.split, workers=0, passes=args.passes).summary
+    gt = evaluate(
+        data, args.pose, args.split, workers=0, passes=args.passes, same_crop_iou=args.same_crop_iou
+    )
     return {
         "data": str(data),
         "images": len(names),
@@ -147,6 +157,42 @@ def one_dataset(data: Path, out: Path, args: argparse.Namespace, onnx: tuple[Pat
         "ground_truth_boxes": gt,
         "images_per_s": {"torch": torch_rate, "onnx": onnx_rate},
     }
+
+
+PASSES_SETTINGS = {  # --passes-table's rows: predict's options for each
+    "1 pass": ["--passes", "1"],
+    "2 passes": ["--passes", "2", "--same-crop-iou", "1"],
+    "default": [],
+}
+
+
+def passes_rows(data: Path, out: Path, args: argparse.Namespace, onnx: tuple[Path, Path]) -> dict[str, Any]:
+    """onnxruntime's predict at each PASSES_SETTINGS, the settings in turn for args.rounds rounds: its
+    images/s per round and the figures of its poses (the same every round: predict is deterministic)."""
+    obj_id = config_from_dict(load_checkpoint(args.pose)["config"]).data.obj_id
+    names = user_folder(data, args.split, obj_id, out / "input", args.scale)
+    predictor = Predictor.load(args.pose)
+    common = [out / "input", "--ckpt", args.pose, "--camera", out / "input" / "camera.json", "--no-vis",
+              "--overwrite", "--detector", onnx[1], "--onnx", onnx[0]]  # fmt: skip
+    rows: dict[str, Any] = {name: {"images_per_s": []} for name in PASSES_SETTINGS}
+    for _ in range(args.rounds):
+        for name, options in PASSES_SETTINGS.items():
+            folder, rate = run_predict([*common, *options, "--out", out / name.replace(" ", "_")])
+            rows[name]["images_per_s"].append(rate)
+            rows[name]["poses"] = score(folder / "predictions.jsonl", names, predictor, args.scale)
+    return {"data": str(data), "images": len(names), "scale": args.scale, "rows": rows}
+
+
+def passes_table(report: dict[str, Any]) -> str:
+    head = "| set | predict | images/s (median; each round) | ADD@0.1d | rotation median | misses |"
+    lines = [head, "|---|---|---|---|---|---|"]
+    for set_name, r in report.items():
+        for name, row in r["rows"].items():
+            rates, s = row["images_per_s"], row["poses"]
+            speed = f"{statistics.median(rates):.1f} ({', '.join(f'{v:.1f}' for v in rates)})"
+            pose = f"{100 * s['add_0.1d']:.1f} % | {s['re_deg_median']:.2f} deg | {s['misses']}"
+            lines.append(f"| {set_name} | {name} | {speed} | {pose} |")
+    return "\n".join(lines)
 
 
 def table(report: dict[str, Any]) -> str:
@@ -181,6 +227,10 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--scale", type=float, default=1.0, help="Resize the user's images S times [1].")
     runs = f"Pose network runs per image, predict's and eval's [{PREDICT_PASSES}, posenet predict's]."
     ap.add_argument("--passes", type=int, default=PREDICT_PASSES, help=runs)
+    gate = f"The passes' gate, predict's and eval's [{SAME_CROP_IOU}, posenet predict's]."
+    ap.add_argument("--same-crop-iou", type=float, default=SAME_CROP_IOU, help=gate)
+    ap.add_argument("--passes-table", action="store_true", help="onnxruntime at 1, 2 and the default passes.")
+    ap.add_argument("--rounds", type=int, default=3, help="--passes-table's rounds of the settings [3].")
     return ap.parse_args()
 
 
@@ -190,6 +240,11 @@ def run(args: argparse.Namespace) -> None:
     if not all(p.is_file() for p in onnx):
         export = ["export", "--ckpt", args.pose, "--onnx", onnx[0], "--detector", args.detector]
         subprocess.run([*POSENET, *export, "--detector-onnx", onnx[1], "--overwrite"], check=True)
+    if args.passes_table:
+        report = {d.name: passes_rows(d, args.out / d.name, args, onnx) for d in args.data}
+        (args.out / "passes.json").write_text(json.dumps(report, indent=2) + "\n")
+        print(passes_table(report))
+        return
     report = {d.name: one_dataset(d, args.out / d.name, args, onnx) for d in args.data}
     (args.out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     print(table(report))

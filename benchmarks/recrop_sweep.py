@@ -18,6 +18,12 @@ of "within 1 point" is read against.
 Writes OUT/results.json after every row (a re-run with the same --out resumes) and prints the table: per
 row the mean IoU of each pass's crop box with bbox_obj, ADD@0.1d, the paired difference and its error,
 and the images right only in that row / only at the true boxes.
+
+Then the gate on the second pass (posenet predict's --same-crop-iou, posenet.predict.recrop.next_crop):
+for each box source and each --gate G, the second pass runs only on the images whose model box at the
+first pass's pose overlaps the first crop box by IoU < G, the others keeping their first pose. Its
+ADD@0.1d follows from the two ungated passes image by image (every pass here runs ungated, --same-crop-iou
+1); printed with the share of images it skips and its paired difference to two passes and to one.
 """
 
 from __future__ import annotations
@@ -32,13 +38,18 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 from harness import parser, run_script
 
-from posenet import evaluate
+from posenet import Predictor, evaluate, make_camera
+from posenet.data.boxes import MISS_PLACEHOLDER, read_boxes
+from posenet.data.layout import scan_split
 from posenet.errors import PosenetError
 from posenet.evaluation.metrics import headline_add
+from posenet.predict.recrop import box_iou, model_box
 
 POSENET = Path(sys.executable).with_name("posenet")
+GATES = (0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95)
 
 
 def parse() -> argparse.Namespace:
@@ -50,6 +61,7 @@ def parse() -> argparse.Namespace:
     ap.add_argument("--passes", type=int, default=3, help="Most re-crop passes [3].")
     ap.add_argument("--detector", type=Path, action="append", default=[], help="Detector checkpoint: a row.")
     ap.add_argument("--out", type=Path, required=True, help="Working folder: boxes, results.json.")
+    ap.add_argument("--gate", type=float, action="append", help=f"Second-pass gates, IoU {list(GATES)}.")
     return ap.parse_args()
 
 
@@ -84,20 +96,62 @@ def boxes_file(data: Path, split: str, source: BoxSource, out: Path) -> Path:
 
 
 def score(args: argparse.Namespace, splits: list[str], source: BoxSource, passes: int) -> dict:
-    """Per-image ADD@0.1d outcomes and the instance-weighted mean crop IoU of each pass."""
-    outcomes, iou_sums, n = {}, [0.0] * passes, 0
+    """Per-image ADD@0.1d outcomes and the instance-weighted mean crop IoU of each pass; at one pass also
+    each image's IoU of its model box at the pose with its crop box (`next_iou`: what the gate reads;
+    none where the image has no pose or no model box)."""
+    outcomes, next_iou, iou_sums, n = {}, {}, [0.0] * passes, 0
+    obj = Predictor.load(args.pose).obj
     for split in splits:
         boxes = boxes_file(args.data, split, source, args.out) if source.option else None
-        result = evaluate(args.data, args.pose, split, boxes=boxes, workers=2, passes=passes)
+        result = evaluate(
+            args.data, args.pose, split, boxes=boxes, workers=2, passes=passes, same_crop_iou=1.0
+        )
         add_key = headline_add(result.summary["symmetric"])[0]  # as posenet eval's add_0.1d: inf on a miss
+        instances = {(i.scene_id, i.im_id): i for i in scan_split(args.data, split, obj.obj_id)}
+        crops = read_boxes(boxes, obj.obj_id) if boxes else {k: i.bbox_obj for k, i in instances.items()}
         for record in result.records:
             key = f"{split}/{record['scene_id']}/{record['im_id']}"
             outcomes[key] = record[add_key] < 0.1 * result.diameter
+            inst = instances[record["scene_id"], record["im_id"]]
+            crop, again = crops.get((inst.scene_id, inst.im_id)), None
+            if passes == 1 and record["R"] is not None and crop not in (None, MISS_PLACEHOLDER):
+                camera = make_camera(inst.K, inst.dist, inst.image_size)
+                R, t = np.reshape(record["R"], (3, 3)), np.asarray(record["t"], np.float64)
+                again = model_box(obj, R, t, camera)
+            next_iou[key] = box_iou(again, crop) if again is not None else None
         k = len(result.records)
         for i, iou in enumerate(result.summary.get("box_iou") or [1.0] * passes):
             iou_sums[i] += k * iou
         n += k
-    return {"outcomes": outcomes, "box_iou": [s / n for s in iou_sums]}
+    return {"outcomes": outcomes, "box_iou": [s / n for s in iou_sums], "next_iou": next_iou}
+
+
+def gated(first: dict, second: dict, gate: float) -> dict[str, bool]:
+    """The outcomes with the second pass run only where the first pass's model box overlaps its crop box
+    by IoU < `gate` (an image with no model box stops after one pass, as predict's does)."""
+    iou = first["next_iou"]
+    return {k: second["outcomes"][k] if iou[k] is not None and iou[k] < gate else v
+            for k, v in first["outcomes"].items()}  # fmt: skip
+
+
+def gate_table(results: dict, sources: list[BoxSource], gates: list[float]) -> str:
+    """Per box source and gate: the images the second pass skips, ADD@0.1d, and its paired differences
+    to two ungated passes and to one."""
+    rows = ["| boxes | gate (IoU) | second pass skipped | ADD@0.1d | vs 2 passes | vs 1 pass |",
+            "|---|---|---|---|---|---|"]  # fmt: skip
+    for source in sources:
+        first, second = results.get(f"{source.key}/1"), results.get(f"{source.key}/2")
+        if first is None or second is None or "next_iou" not in first:
+            continue
+        for gate in gates:
+            row = gated(first, second, gate)
+            ious = first["next_iou"].values()
+            skipped = sum(v is None or v >= gate for v in ious) / len(first["next_iou"])
+            add = sum(row.values()) / len(row)
+            (d2, se2, *_), (d1, se1, *_) = (paired_difference(row, r["outcomes"]) for r in (second, first))
+            figures = f"{100 * skipped:.1f} % | {100 * add:.1f} % | {100 * d2:+.1f} ± {100 * se2:.1f} | "
+            rows.append(f"| {source.name} | {gate:g} | {figures}{100 * d1:+.1f} ± {100 * se1:.1f} |")
+    return "\n".join(rows)
 
 
 def paired_difference(row: dict[str, bool], base: dict[str, bool]) -> tuple[float, float, int, int]:
@@ -115,7 +169,7 @@ def run(args: argparse.Namespace) -> None:
     for source in sources:
         for passes in range(1, args.passes + 1):
             key = f"{source.key}/{passes}"
-            if key not in results:
+            if key not in results or (passes == 1 and "next_iou" not in results[key]):
                 results[key] = score(args, splits, source, passes)
                 args.out.mkdir(parents=True, exist_ok=True)  # made once a row is scored: no empty OUT
                 path.write_text(json.dumps(results))
@@ -131,6 +185,8 @@ def run(args: argparse.Namespace) -> None:
             ious = " / ".join(f"{v:.2f}" for v in row["box_iou"])
             print(f"| {source.name} | {passes} | {ious} | {100 * add:.1f} % "
                   f"| {100 * mean:+.1f} ± {100 * se:.1f} | {gained} / {lost} |")  # fmt: skip
+    print()
+    print(gate_table(results, sources, args.gate or list(GATES)))
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ from posenet.evaluation.options import BATCH_SIZE, CALIBRATION_SPLIT
 from posenet.models import VARIANTS
 from posenet.navigation.config import NavConfig
 from posenet.predict.options import FORMATS as PREDICT_FORMATS
-from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES
+from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES, SAME_CROP_IOU
 from scgen.io import check_output, make_output_folder, preset_intrinsics, write_output
 
 # Building this command line and answering --help load nothing heavier than the modules above: torch,
@@ -52,6 +52,16 @@ def passes_option(default: int, why: str) -> Callable[[Callable[..., Any]], Call
         help="Pose network runs per image: 1 on the box, then each re-cropped around the model's box at the "
         f"pose before (posenet.predict.recrop); {why}",
     )
+
+
+same_crop_option = click.option(
+    "--same-crop-iou",
+    type=FiniteFloatRange(0, 1, min_open=True),
+    default=SAME_CROP_IOU,
+    show_default=True,
+    help="A pass after the first runs only where the model's box at the pose before overlaps the box that "
+    "pass cropped around by less than this IoU (1: every pass runs; posenet.predict.recrop.next_crop).",
+)
 
 
 def filter_options(command: Callable[..., Any]) -> Callable[..., Any]:
@@ -174,6 +184,7 @@ def train(
     help="Pose solver: the network's Patch-PnP, OpenCV's PnP-RANSAC on its predicted xyz and mask, or both.",
 )
 @passes_option(1, "eval gives the box IoU with the true box per pass; 1 is the paper's protocol.")
+@same_crop_option
 @filter_options
 @click.option("--overwrite", is_flag=True, help="Replace an existing --json, --predictions or --bop-csv.")
 def eval_cmd(
@@ -190,6 +201,7 @@ def eval_cmd(
     bop_csv: Path | None,
     pnp: str,
     passes: int,
+    same_crop_iou: float,
     accel_noise: float,
     angular_accel_noise: float,
     overwrite: bool,
@@ -245,7 +257,7 @@ def eval_cmd(
             write_output(json_path, json.dumps(res, indent=2) + "\n")
         return
     results = evaluate_pnp(data, ckpt[0], methods, split, boxes, workers=workers, batch_size=batch_size,
-                           obj_id=obj_id, passes=passes)  # fmt: skip
+                           obj_id=obj_id, passes=passes, same_crop_iou=same_crop_iou)  # fmt: skip
     variant, summaries = results[methods[0]].variant, [r.summary for r in results.values()]
     click.echo(f"boxes: {summaries[0]['boxes']}")
     columns = ["value"] if methods == ("patch",) else [PNP_LABELS[m] for m in methods]
@@ -637,6 +649,7 @@ def viz(
     help="The detector's score floor: a best box scoring less is no detection (flag no_detection).",
 )
 @passes_option(PREDICT_PASSES, "the default was chosen on held-out images (docs/benchmarks.md).")
+@same_crop_option
 @click.option(
     "--track",
     is_flag=True,
@@ -692,6 +705,7 @@ def predict(
     onnx_path: Path | None,
     min_score: float,
     passes: int,
+    same_crop_iou: float,
     track: bool,
     filtered: bool,
     frame_dt: float | None,
@@ -725,7 +739,7 @@ def predict(
     nav_config = replace(NavConfig(), accel_noise=accel_noise, angular_accel_noise=angular_accel_noise)
     inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
                             preset_intrinsics, onnx_path, min_score, passes, track, frame_dt,
-                            nav_config, filtered)  # fmt: skip
+                            nav_config, filtered, same_crop_iou)  # fmt: skip
     batched = None
     if batch > 1:
         batched = BatchPredictor(inputs.predictor, batch, detector, graphs=cuda_graphs, bf16=bf16)

@@ -146,6 +146,14 @@ def test_the_detector_boxes_every_image(
     for r in records:  # a found box with its score and a pose, or an honest miss
         assert (r["box"] is not None and r["R"] is not None) or r["flags"] == ["no_detection"]
     assert not (out / "overlays").exists() and not (out / "sheet.jpg").exists()
+    # predict prepares each frame (decode, warp, detector) a frame ahead in another thread: the records
+    # are still the Predictor's one image at a time
+    predictor = Predictor.load(pose_ckpt, detector_ckpt)
+    camera = read_camera_file(user_folder / "camera.json")
+    for r in records:
+        pose = predictor(cv2.imread(r["source"]), camera)
+        assert r["box"] == (list(pose.box) if pose.box is not None else None), r["source"]
+        assert r["R"] == (pose.R.ravel().tolist() if pose.R is not None else None), r["source"]
 
 
 def test_a_bad_image_is_recorded_and_the_batch_goes_on(user_folder: Path, pose_ckpt: Path, tmp_path: Path):

@@ -28,7 +28,7 @@ from posenet.evaluation.navigation import nearest_twin
 from posenet.evaluation.options import CALIBRATION_SPLIT
 from posenet.navigation.noise import Errors, NoiseModel, calibrate, with_persistence
 from posenet.navigation.so3 import log
-from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES
+from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES, SAME_CROP_IOU
 from scgen.io import SequenceFrame, read_sequence_frames
 
 Key = tuple[int, int]
@@ -50,7 +50,7 @@ def calibrate_noise(
     is no measurement to the filter."""
     keys, errors = split_errors(data, ckpt, split, boxes, passes, workers, min_confidence)
     source = {"data": str(data), "split": split, "boxes": str(boxes) if boxes else "ground truth",
-              "passes": passes, "checkpoint": Path(ckpt).name}  # fmt: skip
+              "passes": passes, "same_crop_iou": SAME_CROP_IOU, "checkpoint": Path(ckpt).name}  # fmt: skip
     model = calibrate(errors, source, min_confidence)
     seq_data, seq_split = sequences if sequences is not None else (data, split)
     frames = read_sequence_frames(seq_data)

@@ -36,8 +36,9 @@ from posenet.export.bench import dummy_inputs, measure_latency_ms
 from posenet.geometry import decode_pose
 from posenet.models import PoseNet
 from posenet.predict.confidence import batch_confidences
+from posenet.predict.options import SAME_CROP_IOU
 from posenet.predict.ransac import PNP_LABELS, ransac_poses
-from posenet.predict.recrop import box_iou, model_box
+from posenet.predict.recrop import box_iou, next_crop
 
 LATENCY_WARMUP = 5  # untimed batch-1 forwards (allocator, cuDNN autotuning)
 LATENCY_ITERS = 20  # timed ones; the latency is their median
@@ -194,6 +195,7 @@ def evaluate(
     obj_id: int | None = None,
     pnp: str = "patch",
     passes: int = 1,
+    same_crop_iou: float = SAME_CROP_IOU,
 ) -> EvalResult:
     """Run the checkpoint over the split's instances of object `obj_id` (default: the object it was
     trained on) on the current device (GPU if any), `batch_size` RoIs at a time, solving each pose with
@@ -202,9 +204,11 @@ def evaluate(
     The batch size changes neither the records (beyond float rounding and their time_s) nor the summary;
     `latency_ms` is the batch-1 network forward, timed by `posenet.export.bench.measure_latency_ms` on the
     same device. With `passes` > 1 each pass after the first re-crops around the model's box at the poses
-    before (posenet.predict.recrop), as `posenet predict --passes` does.
+    before, where it overlaps the box before by less than `same_crop_iou` (posenet.predict.recrop.next_crop),
+    as `posenet predict --passes` does.
     """
-    return evaluate_pnp(data, ckpt, (pnp,), split, boxes, image_ids, workers, batch_size, obj_id, passes)[pnp]
+    return evaluate_pnp(data, ckpt, (pnp,), split, boxes, image_ids, workers, batch_size, obj_id, passes,
+                        same_crop_iou)[pnp]  # fmt: skip
 
 
 def evaluate_pnp(
@@ -218,6 +222,7 @@ def evaluate_pnp(
     batch_size: int = BATCH_SIZE,
     obj_id: int | None = None,
     passes: int = 1,
+    same_crop_iou: float = SAME_CROP_IOU,
 ) -> dict[str, EvalResult]:
     """`evaluate` with each PnP method of `methods` on the same network outputs (one forward pass per
     pass; the re-crops follow the first method's poses). The summary's `box_iou` is the mean IoU of the
@@ -236,7 +241,7 @@ def evaluate_pnp(
     predicted = predict(model, loader, dataset.obj, device, methods, train_cfg.loss.mask_type)
     ious = [crop_iou(dataset, misses)]
     for _ in range(passes - 1):
-        dataset.boxes = recrop_boxes(dataset, predicted[methods[0]][0], misses)
+        dataset.boxes = recrop_boxes(dataset, predicted[methods[0]][0], misses, same_crop_iou)
         predicted = predict(model, loader, dataset.obj, device, methods, train_cfg.loss.mask_type)
         ious.append(crop_iou(dataset, misses))
     latency = measure_latency_ms(model, dummy_inputs(model.config, device), LATENCY_WARMUP, LATENCY_ITERS)
@@ -273,17 +278,18 @@ def crop_iou(dataset: PoseDataset, misses: set[tuple[int, int]]) -> float:
 
 
 def recrop_boxes(
-    dataset: PoseDataset, records: list[dict[str, Any]], misses: set[tuple[int, int]]
+    dataset: PoseDataset, records: list[dict[str, Any]], misses: set[tuple[int, int]], same_crop_iou: float
 ) -> dict[tuple[int, int], Box]:
     """Each image's next crop box: the model's box at its pose in `records` (`predict`'s, in the dataset's
-    order); a missed image, one without a pose, or one whose pose projects nowhere keeps its box."""
+    order); a missed image, one without a pose, or one with no next crop (posenet.predict.recrop.next_crop:
+    its pose projects nowhere, or its box is the same crop) keeps its box, and so its pose."""
     out = {}
     for inst, box, r in zip(dataset.instances, crop_boxes(dataset), records, strict=True):
         again = None
         if inst.key not in misses and r["R"] is not None:
             camera = make_camera(inst.K, inst.dist, inst.image_size)
             R = np.asarray(r["R"], np.float64).reshape(3, 3)
-            again = model_box(dataset.obj, R, np.asarray(r["t"], np.float64), camera)
+            again = next_crop(dataset.obj, R, np.asarray(r["t"], np.float64), camera, box, same_crop_iou)
         out[inst.key] = again if again is not None else box
     return out
 

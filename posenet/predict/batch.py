@@ -42,7 +42,7 @@ from posenet.predict.predictor import (
     load_box_detector,
     pose_flags,
 )
-from posenet.predict.recrop import model_box
+from posenet.predict.recrop import next_crop
 from scgen.io import usable_cores
 
 WARMUP = 3  # eager runs on a side stream before a capture (cuDNN picks its kernels; lazy buffers made)
@@ -199,9 +199,11 @@ class BatchPredictor:
         crops = {i: [train_boxes[i]] for i in todo}
         solved: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
         for k in range(p.passes):  # after the first, re-crops around the model's box at the pose before
-            if k:  # as Predictor.__call__: an image whose pose projects to no box stops there
+            if k:  # as Predictor.__call__: an image whose next crop is none (recrop.next_crop) stops there
                 tic = time.perf_counter()
-                again = {i: model_box(p.obj, *solved[i][:2], p.camera) for i in todo}
+                again = {
+                    i: next_crop(p.obj, *solved[i][:2], p.camera, crops[i][-1], p.same_crop_iou) for i in todo
+                }
                 self._spent("crop", tic, len(todo))
                 todo = [i for i in todo if again[i] is not None]
                 for i in todo:

@@ -16,7 +16,7 @@ from posenet.data.camera import Camera, make_camera, parse_inline, read_camera_f
 from posenet.errors import PosenetError
 from posenet.navigation.config import NavConfig
 from posenet.navigation.noise import NoiseModel, require_noise
-from posenet.predict.options import PREDICT_PASSES
+from posenet.predict.options import PREDICT_PASSES, SAME_CROP_IOU
 from posenet.predict.predictor import Box, Predictor
 from posenet.predict.run import MISS
 from posenet.predict.sources import Frame, dataset_frames, read_frames, resolve_source
@@ -89,6 +89,7 @@ def predict_inputs(
     frame_dt: float | None = None,
     nav_config: NavConfig | None = None,
     filtered: bool = False,
+    same_crop_iou: float = SAME_CROP_IOU,
 ) -> PredictInputs:
     """The checked inputs of one predict run (nothing is written here). A sequence dataset's frames come
     in time order, sequence by sequence (what the filter and the per-sequence overlay videos need). With
@@ -107,7 +108,7 @@ def predict_inputs(
                            "detector: give --detector, and neither --box nor --boxes")  # fmt: skip
     fixed_box = parse_box(box) if box is not None else None
     noise = NoiseModel.load(require_noise(ckpt)) if track or filtered else None
-    predictor = Predictor.load(ckpt, detector, device, data, onnx, min_score, passes)
+    predictor = Predictor.load(ckpt, detector, device, data, onnx, min_score, passes, same_crop_iou)
     sequences = read_sequence_frames(data) if data is not None else {}
     obj_id = predictor.obj.obj_id
     if data is not None:

@@ -10,6 +10,15 @@ FORMATS = ("bop", "speedplus")  # --format: the field's result files beside pred
 # the protocol of the paper's tables, unless --passes says otherwise.
 PREDICT_PASSES = 2
 
+# A pass after the first runs only where the model's box at the pose before overlaps the box that pass
+# cropped around by IoU < SAME_CROP_IOU (posenet.predict.recrop.next_crop); elsewhere the network would see
+# nearly the crop it just saw. Chosen on held-out val images (300) as the lowest gate whose ADD@0.1d stays
+# within one paired standard error of two passes for each network (a 40-minute and a 12-minute one) and
+# box source (true, noisy, detected); on 600 held-out test images it skips a third of the second passes
+# from the detectors' boxes with the 40-minute network and loses nothing against two passes (+0.3 ± 1.2,
+# +0.8 ± 1.0 points; docs/benchmarks.md, "predict's second pass where it changes the crop").
+SAME_CROP_IOU = 0.75
+
 # below: the pose is flagged low_confidence, and the navigation filter takes it for no measurement (on
 # held-out sequences those are the frames in eclipse, where the network gives its prior's guess)
 LOW_CONFIDENCE = 0.5

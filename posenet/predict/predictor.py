@@ -39,9 +39,9 @@ from posenet.detection.options import MIN_SCORE
 from posenet.errors import PosenetError
 from posenet.geometry import decode_pose, mask_probability
 from posenet.predict.confidence import pose_confidence
-from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES
+from posenet.predict.options import LOW_CONFIDENCE, PREDICT_PASSES, SAME_CROP_IOU
 from posenet.predict.pixels import to_bgr8
-from posenet.predict.recrop import model_box
+from posenet.predict.recrop import next_crop
 
 FLAGS = ("no_detection", "behind_camera", "outside_view", "low_confidence")
 STAGES = ("decode", "detector", "crop", "pose_network", "solve", "drawing")  # timed per image (ms)
@@ -90,6 +90,19 @@ class Pose:
 NO_DETECTION = Pose(None, None, None, 0.0, 0.0, ("no_detection",))
 
 
+@dataclass(frozen=True)
+class Prepared:
+    """An image ready for the pose network (Predictor.prepare): as the training camera sees it, the
+    camera fitted to it, its box in it and in the training camera, and the detector's score (1 for a
+    given box)."""
+
+    seen: np.ndarray
+    user: Camera
+    box: Box
+    train_box: Box
+    score: float
+
+
 @dataclass
 class Timings:
     """Milliseconds spent per stage (STAGES), for predict's latency line: a stage may run more than once
@@ -100,6 +113,11 @@ class Timings:
 
     def add(self, stage: str, seconds: float) -> None:
         self.ms[stage].append(seconds * 1000.0)
+
+    def merge(self, other: Timings) -> None:
+        """Add `other`'s runs (a frame's, timed in another thread) to these."""
+        for stage, runs in other.ms.items():
+            self.ms[stage] += runs
 
     def per_image_ms(self, images: int) -> dict[str, float]:
         """Each stage's milliseconds per image over `images` images."""
@@ -135,11 +153,13 @@ class Predictor:
         device: torch.device | None = None,
         min_score: float = 0.0,
         passes: int = PREDICT_PASSES,
+        same_crop_iou: float = SAME_CROP_IOU,
     ) -> None:
         cfg = config_from_dict(state["config"])
         self.network, self.obj, self.camera, self.detector = network, obj, camera, detector
         self.min_score = min_score  # a detection scoring less is none (no_detection)
         self.passes = passes  # network runs per image: 1 on the given box, then re-crops (predict.recrop)
+        self.same_crop_iou = same_crop_iou  # a re-crop whose box overlaps the one before this much is none
         self.device = device or torch.device("cpu")
         self.pad_scale, self.mask_type = cfg.data.pad_scale, cfg.loss.mask_type
         model_cfg = state["model_config"]
@@ -157,15 +177,17 @@ class Predictor:
         onnx: Path | None = None,
         min_score: float | None = None,
         passes: int = PREDICT_PASSES,
+        same_crop_iou: float = SAME_CROP_IOU,
     ) -> Predictor:
         """The pose checkpoint `ckpt` and a detector (its checkpoint, or its ONNX graph from `posenet
         export`: a `.onnx` file runs in onnxruntime) on `device`; `onnx`, the pose network's exported
         graph, runs in onnxruntime instead of torch (the checkpoint still gives the object and camera). A
         checkpoint written before predict existed has no object or camera: `data`, the dataset it was
         trained on, supplies them. A detection scoring under `min_score` (None: the detector's floor,
-        posenet.detection.options.MIN_SCORE) is no detection. `passes`: the network's runs per image, each
-        after the first re-cropped around the model's box at the pose before (posenet.predict.recrop; the
-        default, PREDICT_PASSES, measured there)."""
+        posenet.detection.options.MIN_SCORE) is no detection. `passes`: the network's most runs per image,
+        each after the first re-cropped around the model's box at the pose before, where that box overlaps
+        the box before by less than `same_crop_iou` (posenet.predict.recrop.next_crop; the defaults
+        measured in posenet.predict.options)."""
 
         dev = torch.device(device)
         state = load_checkpoint(ckpt, kind="pose")
@@ -176,7 +198,7 @@ class Predictor:
             network = model_from_state(state, ckpt, dev)  # the checkpoint is read once
         floor = MIN_SCORE if min_score is None else min_score
         detect = load_box_detector(detector, camera, dev)
-        return cls(network, state, obj, camera, detect, dev, floor, passes)
+        return cls(network, state, obj, camera, detect, dev, floor, passes, same_crop_iou)
 
     def detect(self, image: np.ndarray) -> tuple[Box, float] | None:
         """The detector's best box [x, y, w, h] and score in an image of the training camera, or None."""
@@ -188,15 +210,29 @@ class Predictor:
         (posenet.predict.pixels.to_bgr8): grey, BGR or BGRA in OpenCV's order, uint8, uint16 (12-bit data
         in it is found and warned of) or float in [0, 1]; another kind is one PosenetError, and an image
         the camera cannot take (posenet.data.camera.Camera.for_image) one CameraMismatch."""
+        ready = self.prepare(image, camera, box)
+        return ready if isinstance(ready, Pose) else self.finish(ready)
+
+    def prepare(
+        self,
+        image: np.ndarray,
+        camera: Camera | np.ndarray,
+        box: Box | None = None,
+        timings: Timings | None = None,
+    ) -> Prepared | Pose:
+        """__call__'s first half, which needs no pose network: the image in the training camera and its
+        box (the detector's where `box` is None), or NO_DETECTION. `timings` (default: the predictor's)
+        take its stages' times: predict runs it a frame ahead in another thread (posenet.predict.run)."""
+        clock = timings or self.timings
         image, note = to_bgr8(image)
         if note is not None:
-            warnings.warn(note, stacklevel=2)
+            warnings.warn(note, stacklevel=3)
         user = camera if isinstance(camera, Camera) else make_camera(camera)
         user = user.for_image((image.shape[1], image.shape[0]))
-        with _Clock(self.timings, "crop"):
+        with _Clock(clock, "crop"):
             seen = to_training_camera(image, user, self.camera)
         if box is None:
-            with _Clock(self.timings, "detector"):
+            with _Clock(clock, "detector"):
                 found = self.detect(seen)
             if found is None or found[1] < self.min_score:
                 return replace(NO_DETECTION, score=found[1] if found else 0.0)
@@ -204,18 +240,23 @@ class Predictor:
             box = map_box(train_box, self.camera, user)
         else:
             train_box, score = map_box(box, user, self.camera), 1.0
+        return Prepared(seen, user, tuple(float(v) for v in box), train_box, score)  # type: ignore[arg-type]
+
+    def finish(self, ready: Prepared) -> Pose:
+        """__call__'s second half: the pose network's passes on a prepared image, and the pose's flags."""
+        seen, user, train_box = ready.seen, ready.user, ready.train_box
         R, t, confidence = self._estimate(seen, train_box)
         crops = [train_box]
         for _ in range(self.passes - 1):  # re-crop around the box of the model at the pose just decoded
             with _Clock(self.timings, "crop"):
-                again = model_box(self.obj, R, t, self.camera)
+                again = next_crop(self.obj, R, t, self.camera, crops[-1], self.same_crop_iou)
             if again is None:
                 break
             R, t, confidence = self._estimate(seen, again)
             crops.append(again)
         flags = pose_flags(R, t, self.obj, user, confidence)
-        user_crops = [tuple(float(v) for v in box), *(map_box(b, self.camera, user) for b in crops[1:])]
-        return Pose(R, t, user_crops[0], score, confidence, flags, tuple(user_crops))
+        user_crops = [ready.box, *(map_box(b, self.camera, user) for b in crops[1:])]
+        return Pose(R, t, ready.box, ready.score, confidence, flags, tuple(user_crops))
 
     def _estimate(self, seen: np.ndarray, train_box: Box) -> tuple[np.ndarray, np.ndarray, float]:
         """One pass: the pose (R, t) and its confidence from the crop around `train_box` of `seen`, an

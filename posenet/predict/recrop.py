@@ -38,6 +38,16 @@ def model_box(obj: ObjectModel, R: np.ndarray, t: np.ndarray, camera: Camera) ->
     return projected_box(obj.vertices if camera.distorted else obj.hull, R, t, camera)
 
 
+def next_crop(obj: ObjectModel, R: np.ndarray, t: np.ndarray, camera: Camera, box: Box,
+              same_iou: float) -> Box | None:  # fmt: skip
+    """The box the pass after one that cropped around `box` and decoded (R, t) crops around: the model's
+    box at (R, t). None where no pass follows and (R, t) stands: the pose projects to no box, or its box
+    overlaps `box` by `same_iou` or more (IoU), so the next pass would see what this one saw and decode
+    its translation against a box of the same size (at 1, only an identical box stops the passes)."""
+    again = model_box(obj, R, t, camera)
+    return None if again is None or box_iou(again, box) >= same_iou else again
+
+
 def box_iou(a: Box, b: Box) -> float:
     """IoU of two boxes [x, y, w, h] (pixels x .. x + w - 1: each pixel counts whole)."""
     w = min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0])

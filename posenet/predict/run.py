@@ -29,7 +29,7 @@ from posenet.data.camera import Camera, CameraMismatch
 from posenet.navigation.scene import sequence_frames
 from posenet.predict.batch import BatchPredictor
 from posenet.predict.overlay import contact_sheet, draw_pose
-from posenet.predict.predictor import NO_DETECTION, Box, Pose, Predictor
+from posenet.predict.predictor import NO_DETECTION, Box, Pose, Predictor, Prepared, Timings
 from posenet.predict.sources import Frame, load_frame
 from posenet.predict.track import Tracker, estimate_json
 from scgen.io import SequenceFrame, atomic_write_bytes, atomic_write_text, bop
@@ -81,7 +81,8 @@ def run_predict(
     dataset; else its index times `frame_dt`), restarted where a new sequence begins; each record then
     names its box_source and holds the filter's answer (`filter`) and, once its sequence has ended, the
     smoother's (`smoothed`). With `batched` (not with a tracker), frames are loaded in its thread pool and
-    predicted `batched.size` at a time (_batches)."""
+    predicted `batched.size` at a time (_batches); with neither, each frame alone, its loading, warp and
+    detection a frame ahead in another thread (_prepared)."""
     run, tic = PredictRun(), time.perf_counter()
     sheet_every = max(1, total // SHEET_TILES)
     sheet: list[np.ndarray] = []
@@ -90,7 +91,12 @@ def run_predict(
     if vis and not video_fps:
         (out / "overlays").mkdir(exist_ok=True)
     noted: set[str] = set()
-    stream = iter(frames) if batched is None else _batches(frames, batched, camera, box_for)
+    if batched is not None:
+        stream: Iterator[Any] = _batches(frames, batched, camera, box_for)
+    elif tracker is None:
+        stream = _prepared(frames, predictor, camera, box_for)
+    else:
+        stream = iter(frames)
     sequence: int | None = None  # the sequence of the frame before
     tracked: list[dict[str, Any]] = []  # the records of the current track, for its smoother
     for index in itertools.count():
@@ -100,11 +106,14 @@ def run_predict(
         if item is None:
             break
         ready, shares = None, None  # with `batched`: the frame's pose and its share of its batch's ms
-        if batched is None:
-            frame = load_frame(item)  # type: ignore[arg-type]
-            predictor.timings.add("decode", time.perf_counter() - t0)
+        if batched is not None:
+            frame, ready, shares = item
+        elif tracker is None:
+            frame, ready, ahead = item  # prepared a frame ahead: its stages' times come with it
+            predictor.timings.merge(ahead)
         else:
-            frame, ready, shares = item  # type: ignore[misc]
+            frame = load_frame(item)
+            predictor.timings.add("decode", time.perf_counter() - t0)
         base: dict[str, Any] = {"source": frame.name, "index": index}
         if frame.key is not None:
             base |= {"scene_id": frame.key[0], "im_id": frame.key[1]}
@@ -130,6 +139,8 @@ def run_predict(
             box = box_for(frame, index)
             if box == MISS:
                 pose = NO_DETECTION
+            elif isinstance(ready, Prepared):
+                pose = predictor.finish(ready)
             elif ready is not None:
                 pose = ready
             elif tracker is not None:
@@ -181,6 +192,41 @@ def _attach_smoothed(records: list[dict[str, Any]], tracker: Tracker) -> None:
     for record, estimate in zip(records, tracker.smoothed(), strict=True):
         record["smoothed"] = None if estimate is None else estimate_json(estimate)
     records.clear()
+
+
+def _prepared(
+    frames: Iterable[Frame],
+    predictor: Predictor,
+    camera: Camera | None,
+    box_for: Callable[[Frame, int], Box | str | None],
+) -> Iterator[tuple[Frame, Prepared | Pose | None, Timings]]:
+    """The frames, each loaded, warped into the training camera and boxed (Predictor.prepare) in a helper
+    thread a frame ahead, so that the next frame's detector runs while the pose network runs on this one:
+    each frame is still predicted alone and as by Predictor.__call__. With each its prepared image (None
+    where it has no camera or its box is MISS) and the times its preparation took."""
+    stream = iter(frames)
+
+    def prepare(index: int) -> tuple[Frame, Prepared | Pose | None, Timings] | None:
+        timings, tic = Timings(), time.perf_counter()
+        item = next(stream, None)
+        if item is None:
+            return None
+        frame = load_frame(item)
+        timings.add("decode", time.perf_counter() - tic)
+        cam, error = _camera_for(frame, camera)
+        box = box_for(frame, index) if error is None else MISS
+        if box == MISS:
+            return frame, None, timings
+        return frame, predictor.prepare(frame.image, cam, box, timings), timings  # type: ignore[arg-type]
+
+    with ThreadPoolExecutor(1) as ahead:
+        coming = ahead.submit(prepare, 0)
+        for index in itertools.count(1):
+            done = coming.result()
+            if done is None:
+                return
+            coming = ahead.submit(prepare, index)
+            yield done
 
 
 def _batches(
