@@ -55,7 +55,7 @@ figures: install
 	rm -rf .figures
 
 assets: install
-	$(BIN)/python -m scgen.assets.build_spacecraft
+	$(BIN)/python -m scgen.assets.build
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache .figures

@@ -17,6 +17,7 @@ from scgen.dataset.layout import RGB_FORMATS
 from scgen.errors import ScgenError
 from scgen.io.camera_presets import CAMERA_PRESETS
 from scgen.io.cores import usable_cores
+from scgen.scenes.bundled_models import BUNDLED_MODELS, DEFAULT_MODEL
 from scgen.scenes.factors import FACTOR_GROUPS
 
 
@@ -44,7 +45,8 @@ def scene_options(command: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--seed", type=int, default=0, show_default=True,
                      help="Dataset seed: sample i of seed s never changes."),
         click.option("--model", "model_path", type=click.Path(path_type=Path), default=None,
-                     help="Target mesh (OBJ/PLY/GLB/STL); default: the bundled spacecraft."),
+                     help=f"Target: a bundled model ({' | '.join(BUNDLED_MODELS)}; default "
+                          f"{DEFAULT_MODEL}) or a mesh file (OBJ/PLY/GLB/STL)."),
         click.option("--keep-scale", is_flag=True,
                      help="Keep the mesh's own scale (metres) instead of a 0.2 m diameter."),
         click.option("--config", "config_path", type=click.Path(path_type=Path), default=None,

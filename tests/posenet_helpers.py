@@ -81,3 +81,23 @@ def tiny_pose_checkpoint(
         assert res.exit_code == 0, res.output
 
     return shared_dir(tmp_path_factory, f"tiny_{variant}_on_{dataset.name}", build) / "run" / "last.pt"
+
+
+def calibrate_untrained(data: Path, ckpt: Path) -> None:
+    """`posenet calibrate` of an untrained checkpoint on `data`'s test split. The untrained network is never
+    confident, so --min-confidence 0 takes every pose for a measurement."""
+    args = (
+        "calibrate",
+        "--data",
+        data,
+        "--ckpt",
+        ckpt,
+        "--split",
+        "test",
+        "--workers",
+        0,
+        "--min-confidence",
+        0,
+    )
+    res = CliRunner().invoke(posenet_main, [str(a) for a in args])
+    assert res.exit_code == 0, res.output

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import trimesh
@@ -10,6 +12,7 @@ from scgen.annotate.annotate import mask_bbox
 from scgen.dataset.validate import reprojection_error
 from scgen.generator import Generator
 from scgen.scenes import load_config
+from scgen.scenes.bundled_models import BUNDLED_MODELS
 from scgen.scenes.factors import occlusion_group
 from scgen.scenes.model import load_target, normalise_parts
 
@@ -33,7 +36,11 @@ def rendered_samples(model, n: int = 4):
             yield sample.spec, sample.buffers, sample.annotation
 
 
-@pytest.mark.parametrize("make_model", [load_target, odd_mesh_model], ids=["spacecraft", "odd_mesh"])
+@pytest.mark.parametrize(
+    "make_model",
+    [odd_mesh_model, *(functools.partial(load_target, name) for name in BUNDLED_MODELS)],
+    ids=["odd_mesh", *BUNDLED_MODELS],
+)
 def test_xyz_reprojects_and_lies_on_surface(make_model):
     model = make_model()
     surface = trimesh.proximity.ProximityQuery(model.mesh)

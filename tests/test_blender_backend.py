@@ -21,6 +21,7 @@ from scgen.render.lighting import exposure_scale, sun_render_irradiance
 from scgen.render.mitsuba.backend import MitsubaBackend, select_variant
 from scgen.render.sky.backgrounds import srgb_to_linear
 from scgen.scenes import load_config
+from scgen.scenes.bundled_models import BUNDLED_MODELS, DEFAULT_MODEL
 from scgen.scenes.model import load_target, normalise_parts
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, SceneSpec, SunSpec
 
@@ -116,11 +117,9 @@ def test_white_lambertian_plate_facing_the_sun_matches_mitsuba_and_the_camera_mo
     assert blender == pytest.approx(_mitsuba_lambert_plate(spec, albedo), rel=0.01)
 
 
-def test_any_principal_point_and_portrait_images_are_exact(model):
-    """Off-centre principal point, H > W: masks and depth still match Mitsuba's ray casts."""
-    cfg = load_config(overrides={"camera": {"width": 120, "height": 160, "fx": 150.0, "fy": 150.0,
-                                            "cx": 50.3, "cy": 90.8}})  # fmt: skip
-    generator = Generator(model, cfg, 3)
+def assert_labels_match_mitsuba(model, cfg, seed: int) -> None:
+    """Two samples of `seed` rendered by Blender and by Mitsuba: the same instance map and depth."""
+    generator = Generator(model, cfg, seed)
     specs = [generator.scene(i) for i in range(2)]
     blender = BlenderBackend(model, quality="draft")
     try:
@@ -133,6 +132,20 @@ def test_any_principal_point_and_portrait_images_are_exact(model):
         assert ((bb.depth > 0) & (mm.depth > 0)).sum() > 50
         # the same float32 hits as in test_blender_geometry's depth test, to the same bound
         assert median_depth_gap(bb.depth, mm.depth, spec.target.t_vec, model.diameter) <= U32_RAY_HIT
+
+
+def test_any_principal_point_and_portrait_images_are_exact(model):
+    """Off-centre principal point, H > W: masks and depth still match Mitsuba's ray casts."""
+    cfg = load_config(overrides={"camera": {"width": 120, "height": 160, "fx": 150.0, "fy": 150.0,
+                                            "cx": 50.3, "cy": 90.8}})  # fmt: skip
+    assert_labels_match_mitsuba(model, cfg, seed=3)
+
+
+@pytest.mark.parametrize("name", [n for n in BUNDLED_MODELS if n != DEFAULT_MODEL])
+def test_every_bundled_model_gets_the_same_labels_from_cycles_as_from_mitsuba(name):
+    """The fleet's thin antennas, whips and shells: Cycles' masks and depth are Mitsuba's ray casts'."""
+    cfg = load_config(resolution=(128, 96), overrides={"distance": {"range_m": [0.45, 0.8]}})
+    assert_labels_match_mitsuba(load_target(name), cfg, seed=5)
 
 
 def _datablock_counts(bpy) -> list[int]:

@@ -26,12 +26,17 @@ from posenet_helpers import posenet_dataset
 from test_scale_out import assert_same_dataset
 
 from scgen.render.base import MITSUBA_MISSING
+from scgen.scenes.bundled_models import BUNDLED_MODELS
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE_ONLY = shutil.ignore_patterns(
     ".git", ".venv", "__pycache__", "*.egg-info", "build", "dist", "demo_out", ".*cache"
 )
-MODEL = {f"scgen/assets/spacecraft/{f}" for f in ("parts.glb", "obj_000001.ply", "models_info.json")}
+MODEL = {  # every bundled model's files
+    f"scgen/assets/{name}/{f}"
+    for name in BUNDLED_MODELS
+    for f in ("parts.glb", "obj_000001.ply", "models_info.json")
+}
 RENDERERS = ("bpy", "mitsuba", "drjit")
 SMALL_RENDER = ("--backend", "mitsuba", "--resolution", "64x48", "--quality", "draft", "--quiet")
 

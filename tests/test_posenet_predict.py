@@ -18,6 +18,7 @@ import pytest
 import torch
 from click.testing import CliRunner
 from float_bounds import U32, forward_rel, gram_schmidt_gain, pose_checkpoint_rel, rotation_outputs
+from posenet_helpers import calibrate_untrained
 
 import posenet
 from posenet.checkpoint import load_checkpoint, save_checkpoint
@@ -649,20 +650,7 @@ def test_track_a_users_video_on_the_filter(
     the CLI's filtered and smoothed states for the same frames."""
     ckpt = tmp_path / "last.pt"  # a copy: the shared checkpoint stays read-only
     shutil.copy(pose_ckpt, ckpt)
-    # the untrained network is never confident: every pose its measurement (--min-confidence 0)
-    _invoke(
-        "calibrate",
-        "--data",
-        dataset_dir,
-        "--ckpt",
-        ckpt,
-        "--split",
-        "test",
-        "--workers",
-        0,
-        "--min-confidence",
-        0,
-    )
+    calibrate_untrained(dataset_dir, ckpt)
     images = sorted(user_folder.glob("frame*"))
     _write_video(tmp_path / "clip.mp4", images)
     common = ("--ckpt", ckpt, "--detector", detector_ckpt, "--camera", user_folder / "camera.json",

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
-from harness import ROOT, parser, run_script
+from harness import label, render_figure_args, run_script
 
 from scgen import Generator
 from scgen.scenes.finish import finish_group, sample_finish
@@ -28,13 +28,6 @@ from scgen.scenes.rng import factor_rng
 PANEL = (320, 240)
 CLOSE_UP = {"distance": {"min_px": 330.0, "max_px": 360.0}, "occluders": {"group_probs": {"none": 1.0},
             "distractor_prob": 0.0}, "shadow": {"caster_prob": 0.0}}  # fmt: skip
-
-
-def _label(img: np.ndarray, text: str) -> np.ndarray:
-    out = img.copy()
-    cv2.putText(out, text, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 3, cv2.LINE_AA)
-    cv2.putText(out, text, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
-    return out
 
 
 def _generator(overrides: dict, seed: int, **render) -> Generator:
@@ -50,7 +43,7 @@ def earth_row(render: dict) -> list[np.ndarray]:
         for spec in limbs + discs:
             p = spec.background.params
             text = f"{'limb' if p['limb'] else 'disc'} {p['angular_radius_deg']:.0f} deg"
-            panels.append(_label(gen.render(spec).buffers.rgb, text))
+            panels.append(label(gen.render(spec).buffers.rgb, text))
     return panels
 
 
@@ -59,10 +52,10 @@ def stars_row(render: dict) -> list[np.ndarray]:
     for boost in (0.0, 20.0, 24.0):
         overrides = {**CLOSE_UP, "background": {"probs": {"clean": 1.0}, "stars_boost_ev": boost}}
         with _generator(overrides, 2, **render) as gen:
-            panels.append(_label(gen.sample(0).buffers.rgb, f"Hipparcos, stars_boost_ev {boost:g}"))
+            panels.append(label(gen.sample(0).buffers.rgb, f"Hipparcos, stars_boost_ev {boost:g}"))
     overrides = {"background": {"probs": {"complex": 1.0}}}
     with _generator(overrides, 2, **render) as gen:
-        panels.append(_label(gen.sample(1).buffers.rgb, "complex: the Moon"))
+        panels.append(label(gen.sample(1).buffers.rgb, "complex: the Moon"))
     return panels
 
 
@@ -70,21 +63,13 @@ def finish_row(render: dict) -> list[np.ndarray]:
     overrides = {**CLOSE_UP, "background": {"probs": {"clean": 1.0}}, "finish": {"mode": "nominal"}}
     with _generator(overrides, 2, **render) as gen:
         spec = gen.scene(0)
-        panels = [_label(gen.render(spec).buffers.rgb, "finish: nominal")]
+        panels = [label(gen.render(spec).buffers.rgb, "finish: nominal")]
         cfg = {"mode": "varied", "swap_prob": 0.2, "jitter": 1.0, "nominal_prob": 0.0}
         for draw in (3, 5, 11):
             finish = sample_finish(factor_rng(2, draw, "finish"), cfg)
-            panels.append(_label(gen.render(replace(spec, finish=finish)).buffers.rgb,
+            panels.append(label(gen.render(replace(spec, finish=finish)).buffers.rgb,
                                  f"finish: {finish_group(finish)} (draw {draw})"))  # fmt: skip
     return panels
-
-
-def parse_args() -> argparse.Namespace:
-    ap = parser(__doc__)
-    ap.add_argument("--backend", default="mitsuba", help="[mitsuba]")
-    ap.add_argument("--quality", default="default", help="[default]")
-    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "real_sky.jpg", help="[docs/real_sky.jpg]")
-    return ap.parse_args()
 
 
 def run(args: argparse.Namespace) -> None:
@@ -95,4 +80,4 @@ def run(args: argparse.Namespace) -> None:
 
 
 if __name__ == "__main__":
-    run_script(run, parse_args())
+    run_script(run, render_figure_args(__doc__, "real_sky.jpg"))

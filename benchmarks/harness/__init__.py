@@ -1,12 +1,13 @@
 """What every script under benchmarks/ shares, so that no script imports another (benchmarks/MANIFEST.toml
 lists the scripts):
 
-- running: `parser` (the script's docstring as its --help; a bad option is one `Error:` line) and
+- running: `parser` (the script's docstring as its --help; a bad option is one `Error:` line; with
+  `render_figure_args`, a rendered picture's --backend, --quality and --out) and
   `run_script` (bad input, an unreadable or unwritable file, a failed child command: one `Error: ...` line
   and exit status 1, through the shell of the scgen and posenet command lines, clishell);
 - seeds: the learning benchmark's dataset, which the pose benchmarks render alike (SEED, RENDER_N, ...);
 - --out: `fresh_run` (a run folder that holds a run is refused, or deleted with --overwrite);
-- tables and plots: `pct`, `pyplot`;
+- tables and plots: `pct`, `pyplot`, `label` (a caption on a picture's panel);
 - `revision_tree`: the code at another git revision, for the before/after comparisons.
 
 It imports neither torch nor a renderer, so every script's --help stays quick, and of the project only
@@ -50,6 +51,16 @@ class Parser(argparse.ArgumentParser):
 def parser(doc: str | None) -> Parser:
     """A script's parser: its module docstring, as written, is its --help."""
     return Parser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def render_figure_args(doc: str | None, picture: str) -> argparse.Namespace:
+    """The arguments of a script that renders docs/`picture`: --backend (Mitsuba by default: the fast CPU
+    renderer), --quality and --out."""
+    ap = parser(doc)
+    ap.add_argument("--backend", default="mitsuba", help="[mitsuba]")
+    ap.add_argument("--quality", default="default", help="[default]")
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / picture, help=f"[docs/{picture}]")
+    return ap.parse_args()
 
 
 def run_script(run: Callable[[argparse.Namespace], object], args: argparse.Namespace) -> None:
@@ -118,3 +129,13 @@ def revision_tree(rev: str) -> Iterator[Path]:
             yield Path(tmp)
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(code)], cwd=ROOT, check=True)
+
+
+def label(image: Any, text: str) -> Any:
+    """A copy of an RGB panel (uint8) with `text` written in its top-left corner, white on a black outline."""
+    import cv2  # only the picture scripts need it
+
+    out = image.copy()
+    cv2.putText(out, text, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 3, cv2.LINE_AA)
+    cv2.putText(out, text, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
+    return out

@@ -1,2 +1,3 @@
-"""The bundled spacecraft: its builder (`python -m scgen.assets.build_spacecraft`, `make assets`) and the
-built model in `spacecraft/`, package data that scgen.scenes.model reads (BUNDLED_MODEL_DIR)."""
+"""The bundled models: their builders from primitives (`python -m scgen.assets.build`, `make assets`) and
+the built models in `<name>/` (parts.glb, the BOP PLY, models_info.json), package data that
+scgen.scenes.model reads. Their names: scgen.scenes.bundled_models."""

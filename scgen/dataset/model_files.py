@@ -72,6 +72,7 @@ def bop_ply(parts: list[tuple[str, trimesh.Trimesh]]) -> bytes:
 
 
 def write_models_info(model: TargetModel, out: Path, obj_id: int) -> None:
-    """models_info.json: the model's box and diameter, the same for models/ and models_eval/."""
-    info = {str(obj_id): bop.models_info_entry(model.mesh.bounds, model.diameter)}
+    """models_info.json: the model's box, diameter and symmetries (BOP's fields, where it has any), the
+    same for models/ and models_eval/."""
+    info = {str(obj_id): {**bop.models_info_entry(model.mesh.bounds, model.diameter), **model.symmetries}}
     atomic_write_text(out / bop.MODELS_INFO_FILE, json.dumps(info, indent=2) + "\n")

@@ -7,19 +7,21 @@ largest distance between two of its points) equals a fixed value; every pose ref
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+import json
+from dataclasses import dataclass, field
 from importlib.resources import files
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import trimesh
 
 from scgen.errors import ScgenError
+from scgen.io import bop
+from scgen.scenes.bundled_models import BUNDLED_MODELS, DEFAULT_MODEL
 from scgen.scenes.materials import MATERIALS
 
-# the bundled spacecraft ships inside the package (package data: scgen/assets), so an installed wheel finds
-# it anywhere
-BUNDLED_MODEL_DIR = Path(str(files("scgen") / "assets" / "spacecraft"))
+SYMMETRY_KEYS = ("symmetries_discrete", "symmetries_continuous")  # BOP's models_info fields
 
 _MATERIAL_KEYWORDS = (
     ("gold", "mli_gold"),
@@ -48,6 +50,7 @@ class TargetModel:
     parts: list[tuple[str, trimesh.Trimesh]]
     mesh: trimesh.Trimesh
     diameter: float
+    symmetries: dict[str, Any] = field(default_factory=dict)  # BOP's SYMMETRY_KEYS, as in models_info
 
     @property
     def fingerprint(self) -> str:
@@ -57,6 +60,8 @@ class TargetModel:
             h.update(material.encode())
             h.update(np.round(np.asarray(m.vertices, dtype=np.float64), 7).tobytes())
             h.update(np.asarray(m.faces, dtype=np.int64).tobytes())
+        if self.symmetries:  # a model without (every one before the fleet) keeps its fingerprint
+            h.update(json.dumps(self.symmetries, sort_keys=True).encode())
         return h.hexdigest()[:16]
 
 
@@ -105,7 +110,7 @@ def material_for(name: str | None) -> str:
 def load_mesh_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
     """Read OBJ/PLY/GLB/GLTF/STL into (material, mesh) parts; the CAD's material names are kept."""
     if not path.exists():
-        raise ScgenError(f"mesh not found: {path}")
+        raise ScgenError(f"mesh not found: {path} (nor is it a bundled model: {', '.join(BUNDLED_MODELS)})")
     if path.suffix.lower() not in (".obj", ".ply", ".glb", ".gltf", ".stl", ".off"):
         raise ScgenError(
             f"unsupported mesh format '{path.suffix}' for {path} (use OBJ, PLY, GLB, GLTF or STL)"
@@ -130,14 +135,25 @@ def load_mesh_parts(path: Path) -> list[tuple[str, trimesh.Trimesh]]:
     return parts
 
 
+def bundled_model_dir(name: str) -> Path:
+    """The folder of bundled model `name` (BUNDLED_MODELS): package data, so an installed wheel finds it
+    anywhere."""
+    return Path(str(files("scgen") / "assets" / name))
+
+
 def load_target(path: str | Path | None = None, keep_scale: bool = False) -> TargetModel:
-    """The bundled spacecraft (path None) or any user mesh, normalised to the object frame."""
-    if path is None:
-        path = BUNDLED_MODEL_DIR / PARTS_FILE
-        if not path.exists():
+    """A bundled model by name (BUNDLED_MODELS; None: the default spacecraft), stored normalised with its
+    symmetries in its models_info.json, or any user mesh, normalised to the object frame."""
+    name = DEFAULT_MODEL if path is None else str(path)
+    if name in BUNDLED_MODELS:
+        folder = bundled_model_dir(name)
+        if not (folder / PARTS_FILE).exists():
             raise ScgenError(
-                f"bundled model missing at {path}: reinstall scgen, or in a checkout run `make assets`"
+                f"bundled model missing at {folder}: reinstall scgen, or in a checkout run `make assets`"
             )
-        return normalise_parts(load_mesh_parts(path), diameter_m=None, name="spacecraft")
-    path = Path(path)
+        model = normalise_parts(load_mesh_parts(folder / PARTS_FILE), diameter_m=None, name=name)
+        (info,) = bop.read_json(folder / bop.MODELS_INFO_FILE).values()
+        model.symmetries = {k: info[k] for k in SYMMETRY_KEYS if k in info}
+        return model
+    path = Path(path)  # type: ignore[arg-type]
     return normalise_parts(load_mesh_parts(path), None if keep_scale else DEFAULT_DIAMETER_M, name=path.stem)

@@ -1,0 +1,36 @@
+"""Build every bundled model (or those named) from code and write it in the BOP model layout:
+`python -m scgen.assets.build [NAME ...]` (`make assets`), into scgen/assets/<name>/, package data."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+
+from scgen.assets.build_spacecraft import build_spacecraft
+from scgen.assets.fleet import build_cubesat, build_geosat, build_smallsat, build_upper_stage
+from scgen.dataset.layout import OBJ_ID
+from scgen.dataset.model_files import write_model_dir
+from scgen.scenes.bundled_models import BUNDLED_MODELS
+from scgen.scenes.model import TargetModel, bundled_model_dir
+
+BUILDERS: dict[str, Callable[[], TargetModel]] = {
+    "spacecraft": build_spacecraft,
+    "cubesat": build_cubesat,
+    "smallsat": build_smallsat,
+    "geosat": build_geosat,
+    "upper_stage": build_upper_stage,
+}
+
+
+def main(names: list[str]) -> None:
+    """Build and write the models `names` (default: all of BUNDLED_MODELS)."""
+    for name in names or BUNDLED_MODELS:
+        if name not in BUILDERS:
+            sys.exit(f"unknown bundled model '{name}' (choose from {', '.join(BUNDLED_MODELS)})")
+        model, out = BUILDERS[name](), bundled_model_dir(name)
+        write_model_dir(model, out, OBJ_ID)
+        print(f"wrote {out}: {len(model.mesh.faces)} triangles, diameter {model.diameter * 1000:.1f} mm")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
