@@ -147,7 +147,7 @@ def one_dataset(data: Path, out: Path, args: argparse.Namespace, onnx: tuple[Pat
     )
     gt = evaluate(
         data, args.pose, args.split, workers=0, passes=args.passes, same_crop_iou=args.same_crop_iou
-    )
+    ).summary
     return {
         "data": str(data),
         "images": len(names),

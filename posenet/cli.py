@@ -509,6 +509,7 @@ def navigation_summary(data: Path, split: str, ckpt: Path, result: Any, config: 
     "--boxes", type=PATH, default=None, help="Stored detection boxes (BOP JSON); default: GT boxes."
 )
 @passes_option(PREDICT_PASSES, "predict's default, which the tracker's measurements use.")
+@same_crop_option
 @click.option(
     "--min-confidence",
     type=FiniteFloatRange(0, 1),
@@ -532,6 +533,7 @@ def calibrate(
     split: str,
     boxes: Path | None,
     passes: int,
+    same_crop_iou: float,
     min_confidence: float,
     sequences: Path | None,
     sequences_split: str,
@@ -550,7 +552,7 @@ def calibrate(
     out = noise_path(ckpt)
     check_output(out, folder=False, overwrite=True)
     seq = (sequences, sequences_split) if sequences is not None else None
-    model = calibrate_noise(data, ckpt, split, boxes, passes, workers, min_confidence, seq)
+    model = calibrate_noise(data, ckpt, split, boxes, passes, workers, min_confidence, seq, same_crop_iou)
     click.echo(f"split '{split}' of {data}, {passes} pass(es):")
     click.echo(model.table())
     click.echo(f"wrote {write_output(out, model.to_json())}")

@@ -66,8 +66,8 @@ def test_the_upper_stage_looks_the_same_turned_about_its_axis_by_any_angle():
 
 @pytest.mark.parametrize("name", [n for n in FLEET if n != "upper_stage"])
 def test_the_others_have_no_half_turn_symmetry(name):
-    """Every asymmetric model is moved off itself by each half turn about its axes by more than a tenth of
-    BOP's ADD threshold (10 % of the diameter), so that every pose of it is distinct."""
+    """No half turn about its axes maps an asymmetric model onto itself: each moves some part of it off its
+    surface by more than a tenth of BOP's ADD threshold (10 % of the diameter)."""
     model = load_target(name)
     assert model.symmetries == {}
     for axis, R in HALF_TURNS.items():

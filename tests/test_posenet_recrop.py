@@ -27,8 +27,9 @@ from posenet.evaluation.evaluate import evaluate
 from posenet.navigation.estimate import state_from_camera
 from posenet.navigation.noise import NoiseModel
 from posenet.navigation.scene import sequence_frames
+from posenet.predict.options import SAME_CROP_IOU
 from posenet.predict.predictor import Predictor, Timings
-from posenet.predict.recrop import box_iou, in_view, model_box, projected_box
+from posenet.predict.recrop import box_iou, in_view, model_box, next_crop, projected_box
 from posenet.predict.sources import dataset_frames, load_frame
 from posenet.predict.track import DETECTOR, NONE, POSE, SEARCH_EVERY, TRACK, Tracker
 from scgen.io import read_sequence_frames
@@ -97,10 +98,12 @@ def test_the_detector_learns_the_clipped_full_object_box(dataset_dir: Path):
 
 
 def test_each_pass_crops_around_the_pose_before(dataset_dir: Path, pose_ckpt: Path):
-    """Predictor(passes=2), the default: the second crop is projected_box of the first pass's pose;
-    passes=1 is the single pass, whose pose the two-pass run starts from."""
-    one, two = Predictor.load(pose_ckpt, passes=1), Predictor.load(pose_ckpt)
-    assert two.passes == 2
+    """Predictor(passes=2), the default: the second crop is projected_box of the first pass's pose (at
+    --same-crop-iou 1, every time); passes=1 is the single pass, whose pose the two-pass run starts from.
+    At the default gate the second pass runs exactly where that box overlaps the first by IoU < the gate."""
+    one, two = Predictor.load(pose_ckpt, passes=1), Predictor.load(pose_ckpt, same_crop_iou=1.0)
+    gated = Predictor.load(pose_ckpt)
+    assert two.passes == gated.passes == 2 and gated.same_crop_iou == SAME_CROP_IOU
     for frame in dataset_frames(dataset_dir, "test", 1)[:3]:
         frame = load_frame(frame)
         first = one(frame.image, frame.camera, frame.box)
@@ -117,6 +120,14 @@ def test_each_pass_crops_around_the_pose_before(dataset_dir: Path, pose_ckpt: Pa
         assert len(second.crops) == 2 and second.box == frame.box
         assert second.crops[1] == expected
         assert second.to_json()["crops"] == [[round(v, 2) for v in expected]]
+        kept = gated(frame.image, frame.camera, frame.box)
+        if box_iou(expected, frame.box) < SAME_CROP_IOU:
+            assert kept.crops == second.crops and np.array_equal(kept.t, second.t)
+        else:  # the same crop again: the first pass's pose stands
+            assert kept.crops == (frame.box,) and np.array_equal(kept.t, first.t)
+        # next_crop, the gate itself: a box the pose's own is stops the passes, unless the gate is 1
+        assert next_crop(one.obj, first.R, first.t, one.camera, expected, SAME_CROP_IOU) is None
+        assert next_crop(one.obj, first.R, first.t, one.camera, expected, 1.0) == expected
 
 
 def test_eval_passes_recrop_and_report_the_box_iou(dataset_dir: Path, pose_ckpt: Path, tmp_path: Path):
@@ -127,10 +138,12 @@ def test_eval_passes_recrop_and_report_the_box_iou(dataset_dir: Path, pose_ckpt:
     gt = evaluate(dataset_dir, pose_ckpt, workers=0, passes=2).summary
     assert gt["passes"] == 2 and len(gt["box_iou"]) == 2 and gt["box_iou"][0] == 1.0
     out = tmp_path / "eval.json"
-    args = ["eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--boxes", noisy, "--passes", 3]
+    args = ["eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--boxes", noisy, "--passes", 3,
+            "--same-crop-iou", 0.9]  # fmt: skip
     res = CliRunner().invoke(main, [str(a) for a in [*args, "--workers", 0, "--json", out]])
     assert res.exit_code == 0, res.output
     summary = json.loads(out.read_text())
+    assert gt["same_crop_iou"] == SAME_CROP_IOU and summary["same_crop_iou"] == 0.9
     assert len(summary["box_iou"]) == 3 and 0 < summary["box_iou"][0] < 1
     assert "crop box IoU with bbox_obj, per pass" in res.output
 
@@ -144,7 +157,7 @@ def test_the_latency_of_a_stage_run_twice_an_image_is_both_runs(dataset_dir: Pat
     """With two passes the pose network runs twice an image, and the crop stage four times (the warp, the
     model's box at the first pose, each pass's crop): predict's per-image latency is each stage's total
     over the images."""
-    predictor = Predictor.load(pose_ckpt, passes=2)
+    predictor = Predictor.load(pose_ckpt, passes=2, same_crop_iou=1.0)  # every second pass runs
     frames = [load_frame(f) for f in dataset_frames(dataset_dir, "test", 1)[:2]]
     passes = sum(len(predictor(frame.image, frame.camera, frame.box).crops) for frame in frames)
     assert passes > len(frames)  # a re-crop ran (a pose projecting nowhere keeps its first pass)

@@ -1,6 +1,6 @@
 """posenet accuracy against the attitude range: the corridor control widened, at equal compute.
 
-    python benchmarks/figures/posenet_range.py --out OUT [--angles 20 45 90 180] [--steps 1260]
+    python benchmarks/figures/posenet_range.py --out OUT [--angles 20 45 90 180] [--steps 1260] [--model NAME]
 
 For each cone half-angle A renders the corridor control's set with only the attitude range changed
 (benchmarks/figures/posenet_control.py's scene: 2,400 Mitsuba images at 320x240, seed 7, the target 120-180 px
@@ -9,7 +9,8 @@ OUT/cone-A/data. The seed fixes every other draw (sun, sky, distance, occluders,
 differ in the target's attitude alone. Then trains the CPU recipe (GDR-Net, `--config smoke`, the
 ablation's schedule: benchmarks/posenet_ablation.py, seed 0) for --steps on each and tests it on the
 test split (480 images, ground-truth boxes). Beside each point, what the corridor alone scores: the
-nominal attitude as the estimate (harness.pose.prior).
+nominal attitude as the estimate (harness.pose.prior). --model renders another target (a bundled model's
+name, e.g. the asymmetric smallsat, or a mesh) into OUT/NAME-cone-A instead, all else equal.
 
 Resumable: renders resume, a finished run (its result.json) is kept. After each run OUT/range.json and
 OUT/range.png (test rotation median and ADD@0.1d against the half-angle) are rewritten. On 2 cores:
@@ -49,6 +50,7 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--angles", type=float, nargs="+", default=list(ANGLES), help="Half-angles (deg).")
     ap.add_argument("--steps", type=positive, default=ABLATION_STEPS, help="Steps of each run [%(default)s].")
     ap.add_argument("--seed", type=int, default=0, help="Training seed [%(default)s].")
+    ap.add_argument("--model", help="Target: a bundled model's name or a mesh [the spacecraft].")
     return ap.parse_args()
 
 
@@ -60,12 +62,13 @@ def scene(angle: float) -> dict[str, Any]:
     }
 
 
-def point(out: Path, angle: float, steps: int, seed: int) -> dict[str, Any]:
-    """Render (or resume) the set of half-angle `angle`, train one run on it and test it."""
-    data = render_control(out / f"cone-{angle:g}", CONTROL_N, SEED, scene(angle))
+def point(out: Path, angle: float, steps: int, seed: int, model: str | None) -> dict[str, Any]:
+    """Render (or resume) the set of half-angle `angle` of `model`, train one run on it and test it."""
+    folder = out / (f"cone-{angle:g}" if model is None else f"{Path(model).stem}-cone-{angle:g}")
+    data = render_control(folder, CONTROL_N, SEED, scene(angle), model)
     cfg = run_config(VARIANT, seed, steps, data)
     result = train_one(data, data.parent / f"run-{VARIANT}-seed{seed}", cfg, steps, eval_workers=0)
-    return {"angle": angle, "steps": steps, "seed": seed,
+    return {"angle": angle, "steps": steps, "seed": seed, "model": model or "spacecraft",
             "train_wall_s": result["train_wall_s"], "test": result["test"], "prior": prior(data)}  # fmt: skip
 
 
@@ -91,8 +94,8 @@ def plot(path: Path, points: list[dict[str, Any]], steps: int) -> None:
     lines = [h for a in (ax, ax2) for h in a.get_legend_handles_labels()[0]]
     ax.legend(lines, [h.get_label() for h in lines], loc="center right", fontsize=8)
     ax.grid(True, alpha=0.3)
-    ax.set_title(f"GDR-Net, CPU recipe, {steps} steps each ({CONTROL_N:,} images a set); "
-                 f"{points[0]['test']['n']} test images")  # fmt: skip
+    ax.set_title(f"{points[0]['model']}: GDR-Net, CPU recipe, {steps} steps each ({CONTROL_N:,} images a "
+                 f"set); {points[0]['test']['n']} test images")  # fmt: skip
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -102,7 +105,7 @@ def run(args: argparse.Namespace) -> list[dict[str, Any]]:
     args.out.mkdir(parents=True, exist_ok=True)
     points = []
     for angle in args.angles:  # in the order given: the most telling point first, if time is short
-        p = point(args.out, angle, args.steps, args.seed)
+        p = point(args.out, angle, args.steps, args.seed, args.model)
         points.append(p)
         atomic_write_text(args.out / "range.json", json.dumps({"points": points}, indent=1) + "\n")
         plot(args.out / "range.png", points, args.steps)

@@ -298,12 +298,14 @@ def train_and_follow(
 
 
 def render_control(
-    out: Path, n: int = CONTROL_N, seed: int = SEED, scene: dict[str, Any] = CONTROL_SCENE
-) -> Path:
-    """The control set (or `scene`'s variant of it) in OUT/data, resumed when a render is there."""
+    out: Path, n: int = CONTROL_N, seed: int = SEED, scene: dict[str, Any] = CONTROL_SCENE,
+    model: str | None = None,
+) -> Path:  # fmt: skip
+    """The control set (or `scene`'s variant of it, of bundled model or mesh `model`: None, the default
+    spacecraft) in OUT/data, resumed when a render is there."""
     data = out / "data"
     job = RenderJob(out=data, n=n, seed=seed, backend=BACKEND, resolution=CONTROL_RESOLUTION, workers=WORKERS,
-                    overrides=scene)  # fmt: skip
+                    overrides=scene, model_path=None if model is None else Path(model))  # fmt: skip
     s = run_render(job, progress=True)
     print(f"dataset: {data}, rendered {s['rendered']}, reused {s['skipped']}, {s['total_s']:.0f} s; "
           + ", ".join(f"{k} {v}" for k, v in s["splits"].items()))  # fmt: skip

@@ -43,14 +43,15 @@ def calibrate_noise(
     workers: int = 2,
     min_confidence: float = LOW_CONFIDENCE,
     sequences: tuple[Path, str] | None = None,
+    same_crop_iou: float = SAME_CROP_IOU,
 ) -> NoiseModel:
     """The noise model of checkpoint `ckpt`: its error bands from `split` of `data`, and what persists
     along the sequences of `sequences` (a dataset and its split; default: `data` itself where it is a
     sequence dataset). Only poses with a confidence of at least `min_confidence` count: a pose under it
-    is no measurement to the filter."""
-    keys, errors = split_errors(data, ckpt, split, boxes, passes, workers, min_confidence)
+    is no measurement to the filter. `passes` and `same_crop_iou`: predict's, whose poses the filter takes."""
+    keys, errors = split_errors(data, ckpt, split, boxes, passes, same_crop_iou, workers, min_confidence)
     source = {"data": str(data), "split": split, "boxes": str(boxes) if boxes else "ground truth",
-              "passes": passes, "same_crop_iou": SAME_CROP_IOU, "checkpoint": Path(ckpt).name}  # fmt: skip
+              "passes": passes, "same_crop_iou": same_crop_iou, "checkpoint": Path(ckpt).name}  # fmt: skip
     model = calibrate(errors, source, min_confidence)
     seq_data, seq_split = sequences if sequences is not None else (data, split)
     frames = read_sequence_frames(seq_data)
@@ -59,19 +60,22 @@ def calibrate_noise(
             raise PosenetError(f"{seq_data} is not a sequence dataset (its metadata.csv has no sequence_id)")
         return model
     if sequences is not None:
-        keys, errors = split_errors(seq_data, ckpt, seq_split, None, passes, workers, min_confidence)
+        keys, errors = split_errors(
+            seq_data, ckpt, seq_split, None, passes, same_crop_iou, workers, min_confidence
+        )
     series = sequence_series(keys, frames)
     return with_persistence(model, errors, series, {"data": str(seq_data), "split": seq_split})
 
 
 def split_errors(
-    data: Path, ckpt: Path, split: str, boxes: Path | None, passes: int, workers: int, min_confidence: float
-) -> tuple[list[Key], Errors]:
+    data: Path, ckpt: Path, split: str, boxes: Path | None, passes: int, same_crop_iou: float, workers: int,
+    min_confidence: float,
+) -> tuple[list[Key], Errors]:  # fmt: skip
     """The network's errors on a split, one per image posed with at least `min_confidence`: its key, its
     confidence, its rotation error (rotation vector of R_pred R_true^T, camera axes; for an object with
     symmetries, against the symmetric twin of the truth closest to the prediction) and its translation
     error per unit of true depth."""
-    result = evaluate(data, ckpt, split, boxes, workers=workers, passes=passes)
+    result = evaluate(data, ckpt, split, boxes, workers=workers, passes=passes, same_crop_iou=same_crop_iou)
     posed = [r for r in result.records if r["R"] is not None and r.get("confidence", -1.0) >= min_confidence]
     if not posed:
         raise PosenetError(f"split '{split}' of {data} gave no pose with confidence >= {min_confidence} to "

@@ -258,6 +258,7 @@ def evaluate_pnp(
             "pnp": PNP_LABELS[method],
             "pnp_failed": sum(r.get("pnp_failed", False) and not r.get("missed") for r in records),
             "passes": passes,
+            "same_crop_iou": same_crop_iou,
             "box_iou": ious,
         }
         variant = state["model_config"]["variant"]

@@ -43,9 +43,9 @@ def next_crop(obj: ObjectModel, R: np.ndarray, t: np.ndarray, camera: Camera, bo
     """The box the pass after one that cropped around `box` and decoded (R, t) crops around: the model's
     box at (R, t). None where no pass follows and (R, t) stands: the pose projects to no box, or its box
     overlaps `box` by `same_iou` or more (IoU), so the next pass would see what this one saw and decode
-    its translation against a box of the same size (at 1, only an identical box stops the passes)."""
+    its translation against a box of the same size. A `same_iou` of 1 gates nothing: every pass runs."""
     again = model_box(obj, R, t, camera)
-    return None if again is None or box_iou(again, box) >= same_iou else again
+    return None if again is None or (same_iou < 1.0 and box_iou(again, box) >= same_iou) else again
 
 
 def box_iou(a: Box, b: Box) -> float:
