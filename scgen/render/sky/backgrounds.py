@@ -16,6 +16,9 @@ of a sunlit plate): nothing else in the sky glows.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+
 import cv2
 import numpy as np
 
@@ -24,14 +27,18 @@ from scgen.render.lighting import exposure_scale
 from scgen.render.sky.bluemarble import level_of_detail
 from scgen.render.sky.earth_surface import bluemarble_surface, procedural_surface
 from scgen.render.sky.moon_surface import moon_surface
+from scgen.render.sky.rows import row_dot, row_norm
 from scgen.render.sky.stars import star_image
 from scgen.scenes.geometry import random_rotation, unit_sphere_hits
 from scgen.scenes.sky import body_centre, earth_frame, sky_frame
-from scgen.scenes.spec import SceneSpec
+from scgen.scenes.spec import CameraSpec, SceneSpec
 
 STARS_PER_MEGAPIXEL = {"clean": 150, "earth": 150, "cluttered": 600, "complex": 150}
 MOON_TINT = np.array([1.06, 1.0, 0.9])  # the Moon's reddish grey, unit luminance
 SKY_BLUE = np.array([0.22, 0.45, 1.0])  # atmosphere scattering colour
+# the glow above the Earth's limb is drawn out to where it falls below GLOW_FLOOR of a sunlit white plate
+GLOW_FLOOR = 1e-12
+GLINT_FROM = 0.98  # the glint is drawn where the half angle's cosine exceeds this (0.98^2000 = 3e-18)
 
 
 def background_image(spec: SceneSpec) -> np.ndarray:
@@ -49,10 +56,27 @@ def background_image(spec: SceneSpec) -> np.ndarray:
         density = STARS_PER_MEGAPIXEL[kind] * cam.width * cam.height / 1e6
         img = _star_field(rng, cam.height, cam.width, int(density)) * gain
     if kind == "complex":
-        img = _moon(spec, rng, spec.camera.pixel_directions(), img)
+        img = _moon(spec, rng, _pixel_directions(cam), img)
     elif kind == "earth":
-        img = _earth(spec, rng, spec.camera.pixel_directions(), img)
-    return img.astype(np.float32)
+        img = _earth(spec, rng, _pixel_directions(cam), img)
+    return img.astype(np.float32, copy=False)
+
+
+def _pixel_directions(camera: CameraSpec) -> np.ndarray:
+    """camera.pixel_directions(), read-only: made once for a run's camera (its exposure aside)."""
+    key = dataclasses.replace(camera, exposure_ev=0.0)
+    try:
+        hash(key)
+    except TypeError:  # a camera built with lists: made each time
+        return camera.pixel_directions()
+    return _directions(key)
+
+
+@functools.lru_cache(maxsize=2)
+def _directions(camera: CameraSpec) -> np.ndarray:
+    rays = camera.pixel_directions()
+    rays.flags.writeable = False
+    return rays
 
 
 def _star_field(rng: np.random.Generator, h: int, w: int, n_stars: int) -> np.ndarray:
@@ -83,21 +107,21 @@ def _moon(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np
     hit, n, _, _ = unit_sphere_hits(rays, centre)
     turn = random_rotation(rng)  # camera -> selenographic: each sample sees another part of the Moon
     east = np.cross(turn[2], n)  # turn[2]: the Moon's north pole in the camera frame
-    east /= np.maximum(np.linalg.norm(east, axis=1, keepdims=True), 1e-9)
+    east /= np.maximum(row_norm(east), 1e-9)[:, None]
     footprint = _footprint(spec, n, rays[hit], centre)
     sun = np.asarray(spec.sun.direction)
     reflectance = moon_surface(n @ turn.T, n, east, np.cross(n, east), footprint, sun)
-    img = stars.copy()
+    img = stars.astype(np.float32)  # a copy: the caller's image stays as it was
     img[hit] = spec.sun.irradiance * exposure_scale(spec) * reflectance[:, None] * MOON_TINT
-    return img.astype(np.float32)
+    return img
 
 
 def _footprint(spec: SceneSpec, n: np.ndarray, rays: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """Arc of the unit sphere at `centre` (body radii, radians) a pixel spans where its rays hit at normals
     n: the distance over the focal length, stretched by the obliquity's square root (the geometric mean of
     the footprint's two sides)."""
-    mu_v = np.maximum(-np.sum(n * rays, axis=1), 1e-3)
-    return np.linalg.norm(n + centre, axis=1) / spec.camera.focal / np.sqrt(mu_v)
+    mu_v = np.maximum(-row_dot(n, rays), 1e-3)
+    return row_norm(n + centre) / spec.camera.focal / np.sqrt(mu_v)
 
 
 def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: np.ndarray) -> np.ndarray:
@@ -114,33 +138,41 @@ def _earth(spec: SceneSpec, rng: np.random.Generator, rays: np.ndarray, stars: n
     irr = spec.sun.irradiance * exposure_scale(spec)  # image value of a white plate facing the sun
 
     mu_s = n @ sun
-    mu_v = -np.sum(n * rays[hit], axis=1)  # cosine of the viewing angle (1 at disc centre, 0 at limb)
+    rays_hit = rays[hit]
+    mu_v = -row_dot(n, rays_hit)  # cosine of the viewing angle (1 at disc centre, 0 at limb)
     if params.get("earth_map") == "bluemarble":
         q = n @ earth_frame(params).T  # Earth-fixed coordinates: z the north pole, x Greenwich
-        footprint = _footprint(spec, n, rays[hit], centre)
+        footprint = _footprint(spec, n, rays_hit, centre)
         surface, water, cloud = bluemarble_surface(q, level_of_detail(footprint), spec.background.seed)
     else:
         q = n @ random_rotation(rng).T  # continents do not follow the camera
         surface, water, cloud = procedural_surface(rng, q)
     lit = np.clip(mu_s, 0, 1)[:, None]
-    half = sun - rays[hit]
-    half /= np.linalg.norm(half, axis=1, keepdims=True)
-    glint = 0.15 * water * (1 - cloud) * np.clip(np.sum(n * half, 1), 0, 1)[:, None] ** 2000
+    half = sun - rays_hit
+    half /= row_norm(half)[:, None]
+    # the sun's glint: cos^2000 of the half angle, taken where it can show (GLINT_FROM^2000 = 3e-18)
+    cos_half = row_dot(n, half)
+    sharp = np.zeros(len(cos_half))
+    near = cos_half > GLINT_FROM
+    sharp[near] = np.minimum(cos_half[near], 1) ** 2000
+    glint = 0.15 * water * (1 - cloud) * sharp[:, None]
     haze_depth = 1.0 / np.maximum(mu_v, 0.08)  # optical path through the atmosphere grows to the limb
     haze = 0.035 * haze_depth[:, None] * SKY_BLUE * np.clip(mu_s + 0.15, 0, 1)[:, None]
     radiance = (surface * lit + glint * (mu_s > 0)[:, None]) * np.exp(-0.05 * haze_depth)[:, None] + haze
 
-    img = stars.copy()
+    img = stars.astype(np.float32)  # a copy: the caller's image stays as it was
     img[hit] = irr * radiance
-    # glow above the limb: thin shell of scattered light on the day side
-    gap = np.sqrt(np.clip(-disc, 0, None))  # grows with angular distance outside the limb
-    outside = ~hit
+    # glow above the limb: thin shell of scattered light on the day side, drawn where it is above
+    # GLOW_FLOOR (gap < reach), not over the whole sky
+    reach = 0.025 * np.log(0.12 / GLOW_FLOOR)
+    outside = ~hit & (disc > -(reach**2))
+    gap = np.sqrt(-disc[outside])  # grows with angular distance outside the limb
     limb_normal = rays[outside] * b[outside][:, None] - centre
-    limb_normal /= np.maximum(np.linalg.norm(limb_normal, axis=1, keepdims=True), 1e-9)
+    limb_normal /= np.maximum(row_norm(limb_normal), 1e-9)[:, None]
     day = np.clip(limb_normal @ sun + 0.2, 0, 1)
-    glow = 0.12 * np.exp(-gap[outside] / 0.025) * day
+    glow = 0.12 * np.exp(-gap / 0.025) * day
     img[outside] += irr * glow[:, None] * SKY_BLUE
-    return img.astype(np.float32)
+    return img
 
 
 def _user_image(spec: SceneSpec, rng: np.random.Generator) -> np.ndarray:

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from scgen.io.machine_cache import cached_arrays
-from scgen.render.sky.textures import periodic_noise
+from scgen.render.sky.textures import lat_lon, periodic_noise
 from scgen.scenes import sky_data
 from scgen.scenes.sky_data import blue_marble, blue_marble_files
 
@@ -79,16 +79,19 @@ def detail_texture() -> np.ndarray:
 def map_coordinates(q: np.ndarray, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     """Continuous pixel coordinates (x, y; centres at integers) of Earth-fixed unit vectors q (N x 3)
     on an h x w equirectangular map whose column 0 starts at longitude -180 and row 0 at the north pole."""
-    lat = np.arcsin(np.clip(q[:, 2], -1, 1))
-    lon = np.arctan2(q[:, 1], q[:, 0])
+    return _coordinates(*lat_lon(q), h, w)
+
+
+def _coordinates(lat: np.ndarray, lon: np.ndarray, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """map_coordinates from latitudes and longitudes (rad)."""
     return (lon / (2 * np.pi) + 0.5) * w - 0.5, (0.5 - lat / np.pi) * h - 0.5
 
 
-def _bilinear(level: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """N x 4 float32 (albedo R, G, B, water share) at unit vectors q, bilinear (on the codes), wrapping
-    in longitude."""
+def _bilinear(level: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """N x 4 float32 (albedo R, G, B, water share) at latitudes and longitudes, bilinear (on the codes),
+    wrapping in longitude."""
     h, w = level.shape[:2]
-    x, y = map_coordinates(q, h, w)
+    x, y = _coordinates(lat, lon, h, w)
     texel = _remap(level, x, np.clip(y, 0, h - 1))
     return np.concatenate([ALBEDO_OF_CODE[texel[:, :3]], texel[:, 3:] / np.float32(255)], axis=1)
 
@@ -108,37 +111,48 @@ def level_of_detail(footprint_rad: np.ndarray) -> np.ndarray:
     return np.log2(np.maximum(footprint_rad, 1e-12) * pyramid()[0].shape[1] / (2 * np.pi))
 
 
-def lookup(q: np.ndarray, lod: np.ndarray) -> np.ndarray:
+def lookup(q: np.ndarray, lod: np.ndarray, at: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Albedo and water share (N x 4) at Earth-fixed unit vectors q, at level of detail `lod` (N):
-    log2 of map pixels per image pixel at the finest level; between levels, blended (trilinear)."""
+    log2 of map pixels per image pixel at the finest level; between levels, blended (trilinear). `at`:
+    q's latitudes and longitudes where the caller has them (textures.lat_lon)."""
     levels = pyramid()
+    lat, lon = lat_lon(q) if at is None else at
     lod = np.clip(lod, 0.0, LEVELS - 1 - 1e-6)
     base = np.floor(lod).astype(np.int64)
     frac = (lod - base).astype(np.float32)[:, None]
     out = np.zeros((len(q), 4), np.float32)
     for k in np.unique(base):
         sel = np.flatnonzero(base == k)
-        out[sel] = (1 - frac[sel]) * _bilinear(levels[k], q[sel])
+        out[sel] = (1 - frac[sel]) * _bilinear(levels[k], lat[sel], lon[sel])
         blend = sel[frac[sel, 0] > 0]  # magnified pixels (lod clipped to 0) read one level only
-        out[blend] += frac[blend] * _bilinear(levels[k + 1], q[blend])
+        out[blend] += frac[blend] * _bilinear(levels[k + 1], lat[blend], lon[blend])
     return out
 
 
 def detail(q: np.ndarray, lod: np.ndarray, offset: float = 0.0) -> np.ndarray:
     """Fractal detail (N; zero mean) finer than the map, weighted from 0 (a map pixel per image pixel or
     fewer) to 1 (2^DETAIL_FULL_AT image pixels per map pixel). `offset` shifts it (clouds vs. ground)."""
+    return details(q, lod, (offset,))[0]
+
+
+def details(
+    q: np.ndarray, lod: np.ndarray, offsets: tuple[float, ...], at: tuple[np.ndarray, ...] | None = None
+) -> list[np.ndarray]:
+    """detail at each of `offsets`, the map coordinates found once; `at` as lookup's."""
     strength = np.clip(-lod / DETAIL_FULL_AT, 0.0, 1.0).astype(np.float32)
-    out = np.zeros(len(q), np.float32)
+    outs = [np.zeros(len(q), np.float32) for _ in offsets]
     live = strength > 0
     if not live.any():
-        return out
+        return outs
     tex = detail_texture()
-    x, y = map_coordinates(q[live], *pyramid()[0].shape[:2])
-    acc = np.zeros(int(live.sum()), np.float32)
-    for scale, weight in DETAIL_OCTAVES:
-        acc += (
-            weight
-            * _remap(tex, (x * scale + offset) % tex.shape[1], (y * scale + offset) % tex.shape[0])[:, 0]
-        )
-    out[live] = strength[live] * acc
-    return out
+    lat, lon = lat_lon(q[live]) if at is None else (at[0][live], at[1][live])
+    x, y = _coordinates(lat, lon, *pyramid()[0].shape[:2])
+    for out, offset in zip(outs, offsets, strict=True):
+        acc = np.zeros(int(live.sum()), np.float32)
+        for scale, weight in DETAIL_OCTAVES:
+            acc += (
+                weight
+                * _remap(tex, (x * scale + offset) % tex.shape[1], (y * scale + offset) % tex.shape[0])[:, 0]
+            )
+        out[live] = strength[live] * acc
+    return outs

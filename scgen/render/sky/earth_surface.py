@@ -15,7 +15,7 @@ import numpy as np
 
 from scgen.render.conventions import LUMA
 from scgen.render.sky import bluemarble
-from scgen.render.sky.textures import equirect, periodic_noise
+from scgen.render.sky.textures import equirect, equirect_at, lat_lon, periodic_noise
 from scgen.scenes.sky import body_centre, earth_frame
 
 EARTH_OCEAN = np.array([0.010, 0.030, 0.085])
@@ -57,25 +57,34 @@ def cloud_map(seed: int) -> np.ndarray:
     return periodic_noise(rng, *EARTH_MAP, beta=2.4, aspect=0.7)
 
 
-def cloud_cover(seed: int, q: np.ndarray) -> np.ndarray:
+def cloud_cover(seed: int, q: np.ndarray, at: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The cloud field (zero mean, unit deviation) at Earth-fixed unit vectors q (N x 3). Near the poles,
     where an equirectangular map pinches into radial streaks, it is read in a frame turned by 90 degrees
-    (the poles on its equator), blended in between at the same deviation."""
+    (the poles on its equator), blended in between at the same deviation. `at`: q's latitudes and
+    longitudes where the caller has them (textures.lat_lon)."""
     field = cloud_map(seed)
+    lat, lon = lat_lon(q) if at is None else at
     w = np.clip((0.85 - np.abs(q[:, 2])) / 0.25, 0.0, 1.0)  # 1 below 37 deg of latitude, 0 above 58
-    polar = equirect(field, q @ POLE_TO_EQUATOR.T)
-    return (w * equirect(field, q) + (1 - w) * polar) / np.sqrt(w**2 + (1 - w) ** 2)
+    # each frame read only where it weighs (a weight of 0 adds nothing)
+    plain, polar = np.zeros(len(q), np.float32), np.zeros(len(q), np.float32)
+    some = w > 0
+    plain[some] = equirect_at(field, lat[some], lon[some])
+    some = w < 1
+    polar[some] = equirect(field, q[some] @ POLE_TO_EQUATOR.T)
+    return (w * plain + (1 - w) * polar) / np.sqrt(w**2 + (1 - w) ** 2)
 
 
 def bluemarble_surface(q: np.ndarray, lod: np.ndarray, seed: int) -> tuple[np.ndarray, ...]:
     """(albedo N x 3, water N x 1, cloud N x 1): Blue Marble at level of detail `lod` (see
     bluemarble.lookup), flat oceans, and procedural clouds from `seed`."""
-    texel = bluemarble.lookup(q, lod)
+    at = lat_lon(q)
+    texel = bluemarble.lookup(q, lod, at)
     water = texel[:, 3:]
-    ground = texel[:, :3] * np.exp(LAND_DETAIL * bluemarble.detail(q, lod))[:, None]
+    land_detail, cloud_detail = bluemarble.details(q, lod, (0.0, 97.0), at)
+    ground = texel[:, :3] * np.exp(LAND_DETAIL * land_detail)[:, None]
     surface = (1 - water) * ground + water * EARTH_OCEAN
-    texture = np.exp(CLOUD_DETAIL * bluemarble.detail(q, lod, offset=97.0))  # within clouds: no new wisps
-    cloud = np.clip((cloud_cover(seed, q) - CLOUD_THRESHOLD) * CLOUD_GAIN * texture, 0, 1)[:, None]
+    texture = np.exp(CLOUD_DETAIL * cloud_detail)  # within clouds: no new wisps
+    cloud = np.clip((cloud_cover(seed, q, at) - CLOUD_THRESHOLD) * CLOUD_GAIN * texture, 0, 1)[:, None]
     return (1 - cloud) * surface + cloud * EARTH_CLOUD, water, cloud
 
 

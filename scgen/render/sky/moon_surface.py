@@ -21,6 +21,7 @@ import numpy as np
 
 from scgen.io.machine_cache import cached_arrays
 from scgen.render.sky import textures
+from scgen.render.sky.rows import row_dot, row_norm
 from scgen.render.sky.textures import equirect, periodic_noise
 
 MOON_MAP = (1024, 2048)  # equirectangular size of the height and albedo maps (0.18 deg a texel)
@@ -47,6 +48,13 @@ def moon_maps() -> tuple[np.ndarray, ...]:
     (rows: latitude +90..-90), heights in Moon radii, so the slopes are in radians of tilt. Made once on
     a machine (~1 s) and kept in scgen's cache (scgen.io.machine_cache): the same bits in every process."""
     return cached_arrays("moon_maps", (Path(__file__), Path(textures.__file__)), (), _make_moon_maps)
+
+
+@functools.lru_cache(maxsize=1)
+def _stacked_maps() -> np.ndarray:
+    """moon_maps as one H x W x 3 array (albedo, d height / d latitude, d height / d east), so that one
+    look-up reads all three."""
+    return np.dstack(moon_maps())
 
 
 def _make_moon_maps() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -122,25 +130,49 @@ def _uniforms(cells: np.ndarray, salt: int, k: int) -> np.ndarray:
     return out
 
 
+def _pack(cells: np.ndarray) -> np.ndarray:
+    """One int64 key per integer cell (N x 3, each coordinate within +-2^20)."""
+    c = cells.astype(np.int64) + 2**20
+    return (c[:, 0] << 42) | (c[:, 1] << 21) | c[:, 2]
+
+
 def _cell_craters(bases: np.ndarray, cell: float, octave: int) -> tuple[np.ndarray, ...]:
-    """The craters of the 2 x 2 x 2 cells from each base cell (K x 3) of an octave: centres on the
-    sphere (K x M x 3, float32), radii (K x M), depths in radii and a fresh flag (K x M); the candidates
-    off the surface's shell are dropped (M: the most any base keeps; a row's padding has radius 0)."""
-    cells = bases[:, None, :] + np.array(list(np.ndindex(2, 2, 2)))  # K x 8 x 3
-    u = _uniforms(cells, MOON_SEED + 131 * octave, 6 * CANDIDATES).reshape(len(bases), -1, 6)
-    cells = np.repeat(cells, CANDIDATES, axis=1)  # candidates of a cell are adjacent in u's rows
-    centre = (cells + u[..., :3]) * cell
+    """The craters of the 2 x 2 x 2 cells from each base cell (K x 3) of an octave, as one list: base by
+    base, in the cells' order (np.ndindex) and each cell's candidates' order, those on the surface's shell
+    only. (each base's first crater (K), its crater count (K), centres on the sphere (L x 3, float32),
+    radii (L), depths in radii (L), fresh flags (L)). A cell's candidates are drawn once however many
+    bases share it."""
+    cells = (bases[:, None, :] + np.array(list(np.ndindex(2, 2, 2)))).reshape(-1, 3)  # 8K x 3
+    _, first, of_cell = np.unique(_pack(cells), return_index=True, return_inverse=True)
+    cells = cells[first]  # U x 3: the distinct cells
+    u = _uniforms(cells, MOON_SEED + 131 * octave, 6 * CANDIDATES).reshape(len(cells), CANDIDATES, 6)
+    centre = (cells[:, None, :] + u[..., :3]) * cell  # U x CANDIDATES x 3
     radius_3d = np.linalg.norm(centre, axis=-1)
-    radii = cell * (FINE_RADIUS[0] + (FINE_RADIUS[1] - FINE_RADIUS[0]) * u[..., 3] ** 2)
-    on_shell = np.abs(radius_3d - 1) < SHELL * cell
-    order = np.argsort(~on_shell, axis=1, kind="stable")[:, : max(1, on_shell.sum(axis=1).max())]
-    radii = np.where(on_shell, radii, 0.0)  # a candidate off the shell is no crater
+    on_shell = (np.abs(radius_3d - 1) < SHELL * cell).ravel()
+    # each base's candidates: cell by cell, CANDIDATES each (K x 8 CANDIDATES), those on the shell kept
+    candidate = of_cell.reshape(len(bases), 8, 1) * CANDIDATES + np.arange(CANDIDATES)
+    candidate = candidate.reshape(len(bases), -1)
+    kept = on_shell[candidate]
+    count = kept.sum(axis=1)
+    pick = candidate[kept]  # row-major: base by base, in order
+    u = u.reshape(-1, 6)[pick]
+    centre = (centre.reshape(-1, 3)[pick] / radius_3d.ravel()[pick, None]).astype(np.float32)
+    radii = cell * (FINE_RADIUS[0] + (FINE_RADIUS[1] - FINE_RADIUS[0]) * u[:, 3] ** 2)
+    return np.cumsum(count) - count, count, centre, radii, 0.1 + 0.25 * u[:, 4], u[:, 5] < 0.15
 
-    def kept(a: np.ndarray) -> np.ndarray:  # each base's craters first, the columns none has dropped
-        return np.take_along_axis(a, order if a.ndim == 2 else order[..., None], axis=1)
 
-    centre = (centre / radius_3d[..., None]).astype(np.float32)
-    return kept(centre), kept(radii), kept(0.1 + 0.25 * u[..., 4]), kept(u[..., 5] < 0.15)
+def _unique_runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """np.unique(keys, return_inverse=True), sorting only the runs of equal keys (neighbouring pixels
+    mostly share a cell)."""
+    starts = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]]))
+    unique, of_run = np.unique(keys[starts], return_inverse=True)
+    return unique, np.repeat(of_run, np.diff(np.append(starts, len(keys))))
+
+
+def _ragged(start: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows i repeated count[i] times, and beside each the entries start[i] .. start[i] + count[i] - 1."""
+    row = np.repeat(np.arange(len(count)), count)
+    return row, np.arange(len(row)) - np.repeat(np.cumsum(count) - count - start, count)
 
 
 def fine_craters(q: np.ndarray, footprint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -148,7 +180,12 @@ def fine_craters(q: np.ndarray, footprint: np.ndarray) -> tuple[np.ndarray, np.n
     unit vectors q seen with `footprint` Moon radii a pixel: the height gradient (tangent to the sphere,
     dimensionless) summed over the octaves the footprint resolves, each faded in by RESOLVED_PX. Depths
     are 0.05-0.18 of the diameter (degraded to fresh simple craters); one in seven is young, with a
-    bright floor and ejecta halo."""
+    bright floor and ejecta halo.
+
+    A point meets the craters of the 2 x 2 x 2 cells nearest it (from its base cell, floor(q / cell -
+    0.5)), those within REACH radii. The half cell a point lies in fixes its base cell, so the points are
+    grouped by half cell, and each is tried only against its base's craters that reach the half cell's
+    box, in the base's order (the sums add in the same order whatever the grouping)."""
     slope, log_albedo = np.zeros_like(q), np.zeros(len(q))
     for octave in range(FINE_OCTAVES):
         cell = FINE_CELL / 2**octave
@@ -156,26 +193,39 @@ def fine_craters(q: np.ndarray, footprint: np.ndarray) -> tuple[np.ndarray, np.n
         idx = np.nonzero(weight > 0)[0]
         if len(idx) == 0:
             break  # finer octaves are smaller still
-        p = q[idx].astype(np.float32)
-        base = np.floor(q[idx] / cell - 0.5).astype(np.int64)  # the 2 x 2 x 2 cells nearest p start here
-        key = ((base[:, 0] + 2**20) << 42) | ((base[:, 1] + 2**20) << 21) | (base[:, 2] + 2**20)
-        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
-        centres, radii, depths, fresh = _cell_craters(base[first], cell, octave)
-        d = p[:, None, :] - centres[inverse]  # n x M x 3: from each candidate crater's centre
-        x2 = np.einsum("nmk,nmk->nm", d, d) / np.maximum(radii[inverse], 1e-30) ** 2
-        rows, cols = np.nonzero(x2 < REACH**2)
-        if len(rows) == 0:
+        q_live = q if len(idx) == len(q) else q[idx]
+        p = q_live.astype(np.float32)
+        unique_half, group = _unique_runs(_pack(np.floor(q_live / (cell / 2))))  # q / cell exactly, doubled
+        half = np.stack([(unique_half >> s & (2**21 - 1)) - 2**20 for s in (42, 21, 0)], axis=1)
+        base = (half >> 1) - 1 + (half & 1)  # floor(half / 2 - 0.5): the half cell's base cell
+        unique_base, base_of = np.unique(_pack(base), return_inverse=True)
+        bases = np.stack([(unique_base >> s & (2**21 - 1)) - 2**20 for s in (42, 21, 0)], axis=1)
+        start, count, centres, radii, depths, fresh = _cell_craters(bases, cell, octave)
+        # each half cell against its base's craters: kept where the crater reaches its box
+        g, c = _ragged(start[base_of], count[base_of])
+        reach = (REACH * radii[c] + 1e-3 * cell)[:, None]
+        lo = half[g] * (cell / 2)
+        inside = np.all((centres[c] >= lo - reach) & (centres[c] <= lo + (cell / 2) + reach), axis=1)
+        g, c = g[inside], c[inside]
+        per_group = np.bincount(g, minlength=len(half))
+        pixel, pair = _ragged((np.cumsum(per_group) - per_group)[group], per_group[group])
+        k = c[pair]  # each pair's crater
+        d = p[pixel] - centres[k]  # from each candidate crater's centre
+        x2 = np.einsum("nk,nk->n", d, d) / np.maximum(radii[k], 1e-30) ** 2
+        near = np.nonzero(x2 < REACH**2)[0]
+        if len(near) == 0:
             continue
-        x, dh, p_h = np.sqrt(x2[rows, cols]), d[rows, cols], p[rows]
-        tangent = dh - np.sum(dh * p_h, axis=1, keepdims=True) * p_h
-        tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+        rows, k = pixel[near], k[near]
+        x, dh, p_h = np.sqrt(x2[near]), d[near], p[rows]
+        tangent = dh - row_dot(dh, p_h)[:, None] * p_h
+        tangent /= np.maximum(row_norm(tangent), 1e-12)[:, None]
         w = weight[idx[rows]]
-        k = inverse[rows]
-        contribution = (w * crater_profile_slope(x, depths[k, cols]))[:, None] * tangent
+        contribution = (w * crater_profile_slope(x, depths[k]))[:, None] * tangent
         for axis in range(3):
             slope[:, axis] += np.bincount(idx[rows], contribution[:, axis], minlength=len(q))
-        halo = w * fresh[k, cols] * np.log1p(0.4 * np.exp(-((x / 1.3) ** 4)))
-        log_albedo += np.bincount(idx[rows], halo, minlength=len(q))
+        young = np.nonzero(fresh[k])[0]  # the others add no halo
+        halo = w[young] * np.log1p(0.4 * np.exp(-((x[young] / 1.3) ** 4)))
+        log_albedo += np.bincount(idx[rows[young]], halo, minlength=len(q))
     return slope, np.exp(log_albedo)
 
 
@@ -190,19 +240,18 @@ def moon_surface(
     faces away from the sun, it shadows what lies on it (a fine crater's sunward wall is not lit in the
     shade of a large crater's wall), fading over the last 3 degrees; past the sphere's terminator, night.
     """
-    albedo, d_lat, d_lon = moon_maps()
     fine_slope, fine_albedo = fine_craters(q, footprint)
     east_q = np.stack([-q[:, 1], q[:, 0], np.zeros(len(q))], axis=1)  # selenographic east: z x q
-    east_q /= np.maximum(np.linalg.norm(east_q, axis=1, keepdims=True), 1e-9)
+    east_q /= np.maximum(row_norm(east_q), 1e-9)[:, None]
     north_q = np.cross(q, east_q)
-    map_north, map_east = equirect(d_lat, q), equirect(d_lon, q)
-    s_north = np.clip(map_north + np.sum(fine_slope * north_q, axis=1), -MAX_SLOPE, MAX_SLOPE)
-    s_east = np.clip(map_east + np.sum(fine_slope * east_q, axis=1), -MAX_SLOPE, MAX_SLOPE)
+    albedo, map_north, map_east = equirect(_stacked_maps(), q).T
+    s_north = np.clip(map_north + row_dot(fine_slope, north_q), -MAX_SLOPE, MAX_SLOPE)
+    s_east = np.clip(map_east + row_dot(fine_slope, east_q), -MAX_SLOPE, MAX_SLOPE)
 
     def cosine(slope_east: np.ndarray, slope_north: np.ndarray) -> np.ndarray:
         tilted = n - slope_east[:, None] * east - slope_north[:, None] * north
-        return (tilted @ sun) / np.linalg.norm(tilted, axis=1)
+        return (tilted @ sun) / row_norm(tilted)
 
     terrain = np.clip(cosine(map_east, map_north) / np.sin(np.deg2rad(3.0)), 0, 1)
     lit = np.clip(cosine(s_east, s_north), 0, 1) * terrain * (n @ sun > 0)
-    return equirect(albedo, q) * fine_albedo * lit
+    return albedo * fine_albedo * lit

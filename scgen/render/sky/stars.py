@@ -89,12 +89,19 @@ def star_image(camera: CameraSpec, frame: np.ndarray, boost_ev: float = 0.0) -> 
     gain = 2.0 ** (boost_ev - camera.exposure_ev)
     flux = np.pi * relative_irradiance(hp) / pixel_solid_angle(camera, uv[:, 0], uv[:, 1]) * gain
     value = flux[:, None] * tint(bv)
-    img = np.zeros((h, w, 3), np.float64)
     x0, y0 = np.floor(uv[:, 0]).astype(np.int64), np.floor(uv[:, 1]).astype(np.int64)
     fx, fy = uv[:, 0] - x0, uv[:, 1] - y0
+    pixels, shares = [], []
     for dy, wy in ((0, 1 - fy), (1, fy)):
         for dx, wx in ((0, 1 - fx), (1, fx)):
             x, y = x0 + dx, y0 + dy
             ok = (x >= 0) & (x < w) & (y >= 0) & (y < h)  # the share that falls outside is lost
-            np.add.at(img, (y[ok], x[ok]), value[ok] * (wx * wy)[ok, None])
-    return img.astype(np.float32)
+            pixels.append(y[ok] * w + x[ok])
+            shares.append(value[ok] * (wx * wy)[ok, None])
+    # summed per pixel in float64, in the order the four corners and the stars come (np.add.at's)
+    touched, which = np.unique(np.concatenate(pixels), return_inverse=True)
+    shares = np.concatenate(shares)
+    img = np.zeros((h * w, 3), np.float32)
+    for c in range(3):
+        img[touched, c] = np.bincount(which, shares[:, c], minlength=len(touched))
+    return img.reshape(h, w, 3)

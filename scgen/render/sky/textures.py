@@ -21,16 +21,30 @@ def periodic_noise(rng: np.random.Generator, h: int, w: int, beta: float, aspect
     return (out / out.std()).astype(np.float32)
 
 
+def lat_lon(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Latitude and longitude (rad) of unit vectors q (N x 3) in a frame whose z is the pole."""
+    return np.arcsin(np.clip(q[:, 2], -1, 1)), np.arctan2(q[:, 1], q[:, 0])
+
+
 def equirect(texture: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Bilinear look-up of an equirectangular map (rows: latitude +90..-90) at unit vectors q (N x 3)."""
-    h, w = texture.shape
-    lat = np.arcsin(np.clip(q[:, 2], -1, 1))
-    lon = np.arctan2(q[:, 1], q[:, 0])
+    return equirect_at(texture, *lat_lon(q))
+
+
+def equirect_at(texture: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """Bilinear look-up of a float32 equirectangular map (H x W, or H x W x C for C maps at once: N x C)
+    at latitudes and longitudes (rad; lat_lon's), in float32."""
+    h, w = texture.shape[:2]
     x = (lon / (2 * np.pi) + 0.5) * w - 0.5
     y = np.clip((0.5 - lat / np.pi) * (h - 1), 0, h - 1)
     x0, y0 = np.floor(x).astype(np.int64), np.minimum(np.floor(y).astype(np.int64), h - 2)
-    fx, fy = x - x0, y - y0
+    fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
+    if texture.ndim == 3:
+        fx, fy = fx[:, None], fy[:, None]
     x0, x1 = x0 % w, (x0 + 1) % w  # wraps at the date line
-    top = (1 - fx) * texture[y0, x0] + fx * texture[y0, x1]
-    bottom = (1 - fx) * texture[y0 + 1, x0] + fx * texture[y0 + 1, x1]
+    flat = texture.reshape(h * w, *texture.shape[2:])
+    row = y0 * w
+    top = (1 - fx) * flat.take(row + x0, axis=0) + fx * flat.take(row + x1, axis=0)
+    row += w
+    bottom = (1 - fx) * flat.take(row + x0, axis=0) + fx * flat.take(row + x1, axis=0)
     return (1 - fy) * top + fy * bottom
