@@ -50,7 +50,13 @@ def highlight_ev(image: np.ndarray, max_clipped: float) -> float:
     """The least EV at which at most `max_clipped` of the pixels clip: a pixel clips at EV s when its
     brightest channel is >= 2^s, so s is just above log2 of the (k+1)-th brightest pixel,
     k = max_clipped * pixels (-inf when nothing is that bright)."""
-    peak = image.max(axis=-1).ravel() if image.ndim == 3 else image.ravel()
+    if image.ndim == 3:  # each pixel's brightest channel (np.maximum: a reduce over a short axis is slow)
+        peak = image[..., 0].copy()
+        for c in range(1, image.shape[-1]):
+            np.maximum(peak, image[..., c], out=peak)
+        peak = peak.ravel()
+    else:
+        peak = image.ravel()
     k = int(max_clipped * peak.size)
     if k >= peak.size:
         return -np.inf

@@ -45,8 +45,10 @@ def bloom_kernel(radius_px: int, spikes: int) -> np.ndarray:
 
 def bloom(image: np.ndarray, share: float, radius_px: float, spikes: int) -> np.ndarray:
     """Spread `share` of the light above saturation (image value 1) through the wide PSF."""
+    if share <= 0 or image.max() <= 1.0:  # nothing above saturation (one cheap pass; NaN goes on)
+        return image
     excess = np.maximum(image - 1.0, 0.0)
-    if share <= 0 or not excess.any():
+    if not excess.any():
         return image
     h, w = image.shape[:2]
     small = cv2.resize(excess, (max(1, w // BLOOM_DOWNSAMPLE), max(1, h // BLOOM_DOWNSAMPLE)),

@@ -52,8 +52,8 @@ def lateral_colour(image: np.ndarray, camera: CameraSpec, shift_px: float) -> np
     out = image.copy()
     for channel, sign in ((0, 1.0), (2, -1.0)):
         scale = 1.0 + sign * shift_px / reach  # the channel's image is `scale` times larger: sample inwards
-        map_x = ((u - cx) / scale + cx).astype(np.float32)
-        map_y = ((v - cy) / scale + cy).astype(np.float32)
+        map_x = ((u - cx) / scale + cx).astype(np.float32, copy=False)
+        map_y = ((v - cy) / scale + cy).astype(np.float32, copy=False)
         out[..., channel] = cv2.remap(image[..., channel], map_x, map_y, cv2.INTER_LINEAR,
                                       borderMode=cv2.BORDER_REPLICATE)  # fmt: skip
     return out

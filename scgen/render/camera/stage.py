@@ -15,8 +15,8 @@ from scgen.io.buffers import TARGET_ID, CameraRecord
 from scgen.render.camera import glare, optics
 from scgen.render.camera.exposure import exposure_shift_ev, luminance
 from scgen.render.camera.lens import to_camera
-from scgen.render.camera.output import encode
-from scgen.render.camera.sensor import expose
+from scgen.render.camera.output import encode, encode_codes, saturated_code
+from scgen.render.camera.sensor import expose_codes
 from scgen.scenes.imaging import IDEAL_IMAGING
 from scgen.scenes.spec import SceneSpec
 
@@ -43,8 +43,12 @@ def record_image(
     image = optics.motion_blur(image, imaging.motion_blur_px, imaging.motion_blur_deg)
     g = cam.glare
     image = glare.bloom(image, g.bloom, g.bloom_radius_px, g.spikes)
-    if cam.sensor.enabled:
-        image = expose(image, cam.sensor, imaging.gain, g.blooming, spec.seed, rng)
+    out = cam.output
+    if cam.sensor.enabled:  # the ADC's codes to the file's by table (the same pixels as encode(expose))
+        codes = expose_codes(image, cam.sensor, imaging.gain, g.blooming, spec.seed, rng)
+        saturated = float(np.count_nonzero(codes >= saturated_code(cam.sensor.adc_bits)) / codes.size)
+        pixels = encode_codes(codes, cam.sensor.adc_bits, out.curve, out.bits)
+        return pixels, CameraRecord(float(ev_total), flared, saturated)
     saturated = float((image >= 1.0).mean())
-    pixels = encode(image, cam.output.curve, cam.output.bits)
+    pixels = encode(image, out.curve, out.bits)
     return pixels, CameraRecord(float(ev_total), flared, saturated)
