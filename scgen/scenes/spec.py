@@ -6,7 +6,8 @@ The camera sits at the origin, so the camera frame doubles as the world frame.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+import functools
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -103,14 +104,31 @@ class CameraSpec:
         return project(self.K_mat, np.concatenate([xy, np.ones((len(xy), 1))], axis=1))
 
     def pixel_rays(self) -> np.ndarray:
-        """Rays (z = 1) through every pixel centre, H x W x 3, float64."""
-        v, u = np.mgrid[0 : self.height, 0 : self.width].astype(np.float64)
-        return self.rays(u, v)
+        """Rays (z = 1) through every pixel centre, H x W x 3, float64, read-only (_pixel_grids)."""
+        return self._pixel_grids()[0]
 
     def pixel_directions(self) -> np.ndarray:
-        """Unit camera-frame directions through every pixel centre, H x W x 3, float64."""
-        rays = self.pixel_rays()
-        return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+        """Unit camera-frame directions through every pixel centre, H x W x 3, float64, read-only."""
+        return self._pixel_grids()[1]
+
+    def _pixel_grids(self) -> tuple[np.ndarray, np.ndarray]:
+        """pixel_rays and pixel_directions, made once for a camera's geometry (its exposure aside): the
+        annotation, the sky and Mitsuba's label rays take them every sample."""
+        geometry = replace(self, exposure_ev=0.0)
+        try:
+            return _pixel_grids(geometry)
+        except TypeError:  # a camera built with lists is unhashable: made each time
+            return _pixel_grids.__wrapped__(geometry)
+
+
+@functools.lru_cache(maxsize=2)
+def _pixel_grids(camera: CameraSpec) -> tuple[np.ndarray, np.ndarray]:
+    """`camera`'s rays (z = 1) and unit directions through every pixel centre, H x W x 3, read-only."""
+    v, u = np.mgrid[0 : camera.height, 0 : camera.width].astype(np.float64)
+    rays = camera.rays(u, v)
+    directions = rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+    rays.flags.writeable = directions.flags.writeable = False
+    return rays, directions
 
 
 @dataclass(frozen=True)

@@ -16,9 +16,6 @@ of a sunlit plate): nothing else in the sky glows.
 
 from __future__ import annotations
 
-import dataclasses
-import functools
-
 import cv2
 import numpy as np
 
@@ -31,7 +28,7 @@ from scgen.render.sky.rows import row_dot, row_norm
 from scgen.render.sky.stars import star_image
 from scgen.scenes.geometry import random_rotation, unit_sphere_hits
 from scgen.scenes.sky import body_centre, earth_frame, sky_frame
-from scgen.scenes.spec import CameraSpec, SceneSpec
+from scgen.scenes.spec import SceneSpec
 
 STARS_PER_MEGAPIXEL = {"clean": 150, "earth": 150, "cluttered": 600, "complex": 150}
 MOON_TINT = np.array([1.06, 1.0, 0.9])  # the Moon's reddish grey, unit luminance
@@ -56,27 +53,10 @@ def background_image(spec: SceneSpec) -> np.ndarray:
         density = STARS_PER_MEGAPIXEL[kind] * cam.width * cam.height / 1e6
         img = _star_field(rng, cam.height, cam.width, int(density)) * gain
     if kind == "complex":
-        img = _moon(spec, rng, _pixel_directions(cam), img)
+        img = _moon(spec, rng, cam.pixel_directions(), img)
     elif kind == "earth":
-        img = _earth(spec, rng, _pixel_directions(cam), img)
+        img = _earth(spec, rng, cam.pixel_directions(), img)
     return img.astype(np.float32, copy=False)
-
-
-def _pixel_directions(camera: CameraSpec) -> np.ndarray:
-    """camera.pixel_directions(), read-only: made once for a run's camera (its exposure aside)."""
-    key = dataclasses.replace(camera, exposure_ev=0.0)
-    try:
-        hash(key)
-    except TypeError:  # a camera built with lists: made each time
-        return camera.pixel_directions()
-    return _directions(key)
-
-
-@functools.lru_cache(maxsize=2)
-def _directions(camera: CameraSpec) -> np.ndarray:
-    rays = camera.pixel_directions()
-    rays.flags.writeable = False
-    return rays
 
 
 def _star_field(rng: np.random.Generator, h: int, w: int, n_stars: int) -> np.ndarray:
