@@ -3,11 +3,12 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from collections.abc import Callable
 
 from scgen.assets.build_spacecraft import build_spacecraft
-from scgen.assets.fleet import build_cubesat, build_geosat, build_smallsat, build_upper_stage
+from scgen.assets.fleet import FLEET, build_fleet_model
 from scgen.dataset.layout import OBJ_ID
 from scgen.dataset.model_files import write_model_dir
 from scgen.scenes.bundled_models import BUNDLED_MODELS
@@ -15,10 +16,7 @@ from scgen.scenes.model import TargetModel, bundled_model_dir
 
 BUILDERS: dict[str, Callable[[], TargetModel]] = {
     "spacecraft": build_spacecraft,
-    "cubesat": build_cubesat,
-    "smallsat": build_smallsat,
-    "geosat": build_geosat,
-    "upper_stage": build_upper_stage,
+    **{name: functools.partial(build_fleet_model, name) for name in FLEET},
 }
 
 

@@ -139,23 +139,18 @@ def upper_stage_parts() -> list[Part]:
     return [*parts, (material, bell)]
 
 
-def build_cubesat() -> TargetModel:
-    """The 6U CubeSat, normalised."""
-    return normalise_parts(cubesat_parts(), DEFAULT_DIAMETER_M, name="cubesat")
+# name: the model's parts and its BOP symmetries (models_info.json)
+FLEET = {
+    "cubesat": (cubesat_parts, {}),
+    "smallsat": (smallsat_parts, {}),
+    "geosat": (geosat_parts, {}),
+    "upper_stage": (upper_stage_parts, Z_AXIS_SYMMETRY),
+}
 
 
-def build_smallsat() -> TargetModel:
-    """The Tango-like small satellite, normalised."""
-    return normalise_parts(smallsat_parts(), DEFAULT_DIAMETER_M, name="smallsat")
-
-
-def build_geosat() -> TargetModel:
-    """The GEO communication satellite, normalised."""
-    return normalise_parts(geosat_parts(), DEFAULT_DIAMETER_M, name="geosat")
-
-
-def build_upper_stage() -> TargetModel:
-    """The spent upper stage, normalised, with its continuous symmetry about z."""
-    model = normalise_parts(upper_stage_parts(), DEFAULT_DIAMETER_M, name="upper_stage")
-    model.symmetries = Z_AXIS_SYMMETRY
+def build_fleet_model(name: str) -> TargetModel:
+    """Fleet model `name` (FLEET), normalised, with its symmetries."""
+    parts, symmetries = FLEET[name]
+    model = normalise_parts(parts(), DEFAULT_DIAMETER_M, name=name)
+    model.symmetries = symmetries
     return model
