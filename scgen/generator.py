@@ -10,25 +10,35 @@ sample is sampled, rendered and annotated the same way everywhere.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from scgen.annotate import Annotation, annotate
+from scgen.annotate import Annotation, annotate, annotate_objects
 from scgen.io.buffers import Buffers
 from scgen.scenes import SceneSpec, TargetShape, load_config, sample_scene
+from scgen.scenes.config.objects import object_models
 from scgen.scenes.model import TargetModel, load_target
 from scgen.scenes.motion.sequence import is_sequence, sample_sequence
 from scgen.scenes.motion.tumble import MassProperties, mass_properties
+from scgen.scenes.sampler import ObjectDraw
 
 
 @dataclass(frozen=True)
 class Sample:
-    """One sample before it is written: what was asked for, what the renderer saw, the labels."""
+    """One sample before it is written: what was asked for, what the renderer saw, the labels (the
+    target's, then each of spec.objects')."""
 
     spec: SceneSpec
     buffers: Buffers
     annotation: Annotation
+    objects: tuple[Annotation, ...] = ()
+
+    @property
+    def annotations(self) -> tuple[Annotation, ...]:
+        """Every labelled instance's labels, in scene_gt order."""
+        return (self.annotation, *self.objects)
 
 
 class Generator:
@@ -71,7 +81,28 @@ class Generator:
         if is_sequence(self.cfg):
             sequence, frame = divmod(index, self.cfg["sequence"]["frames"])
             return self.sequence(sequence)[frame]
-        return sample_scene(self.seed, index, self.cfg, self.shape)
+        return sample_scene(self.seed, index, self.cfg, self.shape, self.object_draws)
+
+    @functools.cached_property
+    def models(self) -> dict[int, TargetModel]:
+        """The dataset's objects by BOP obj_id: 1 the target, then each `[[objects]]` model not named before
+        (scgen.scenes.config.objects.object_models), loaded with the target's keep_scale."""
+        source, keep_scale = self.model_source or (None, False)
+        keys = object_models(self.cfg, str(source) if source else self.model.name)
+        others = {k: load_target(m, keep_scale=keep_scale) for k, m in enumerate(keys[1:], 2)}
+        return {1: self.model, **others}
+
+    @functools.cached_property
+    def object_draws(self) -> tuple[ObjectDraw, ...]:
+        """What the sampler places of each `[[objects]]` entry (none without the table)."""
+        entries = self.cfg.get("objects", ())
+        if not entries:
+            return ()
+        source = self.model_source[0] if self.model_source else None
+        keys = object_models(self.cfg, str(source) if source else self.model.name)
+        shapes = {k: TargetShape.from_mesh(m.mesh, m.diameter) for k, m in self.models.items()}
+        ids = [keys.index(e["model"]) + 1 for e in entries]
+        return tuple(ObjectDraw(k, shapes[k], e) for k, e in zip(ids, entries, strict=True))
 
     @property
     def frames(self) -> int:
@@ -94,9 +125,10 @@ class Generator:
             from scgen.render.base import create_backend
 
             r = self.render_settings
-            self._backend = create_backend(r["backend"], self.model, r["quality"], r["device"], r["threads"])
+            self._backend = create_backend(r["backend"], self.model, r["quality"], r["device"], r["threads"],
+                                           self.models)  # fmt: skip
         buffers = self._backend.render(spec)
-        return Sample(spec, buffers, annotate(spec, buffers))
+        return Sample(spec, buffers, annotate(spec, buffers), annotate_objects(spec, buffers))
 
     def sample(self, index: int) -> Sample:
         """Sample `index` of the seed, rendered and annotated exactly as `scgen render` writes it."""

@@ -1,5 +1,5 @@
 """Annotation: pure numpy on Buffers (no renderer imports)."""
 
-from scgen.annotate.annotate import Annotation, annotate
+from scgen.annotate.annotate import Annotation, annotate, annotate_objects
 
-__all__ = ["Annotation", "annotate"]
+__all__ = ["Annotation", "annotate", "annotate_objects"]

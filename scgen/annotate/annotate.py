@@ -10,9 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from scgen.io import bop
-from scgen.io.buffers import TARGET_ID, Buffers
+from scgen.io.buffers import TARGET_ID, Buffers, object_instance_id
 from scgen.scenes.factors import occlusion_group, shadow_label
-from scgen.scenes.spec import CameraSpec, SceneSpec
+from scgen.scenes.spec import CameraSpec, Pose, SceneSpec
 
 Box = tuple[int, int, int, int]  # x, y, w, h in pixels; may reach past the image
 PAIRS_PER_CHUNK = 1 << 18  # (triangle, pixel) tests covered_pixels holds at once (~40 MB)
@@ -32,7 +32,7 @@ class Annotation:
     px_count_visib: int
     visib_fract: float
     r_occ: float
-    shadow_fraction: float
+    shadow_fraction: float  # the target's; 0 for the other labelled objects (a factor of the target)
 
     @property
     def occlusion_group(self) -> str:
@@ -121,10 +121,26 @@ def _inside(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def annotate(spec: SceneSpec, buffers: Buffers) -> Annotation:
-    """All labels of one rendered sample."""
-    mask = buffers.target_depth > 0
-    mask_visib = (buffers.instance == TARGET_ID) & mask
-    xyz = backproject_to_model(buffers.depth, spec.camera, spec.target.R_mat, spec.target.t_vec)
+    """The target's labels of one rendered sample."""
+    ann = instance_annotation(spec, buffers, TARGET_ID, buffers.target_depth, spec.target)
+    sun = spec.sun.direction
+    ann.shadow_fraction = shadow_fraction(ann.mask_visib, buffers.normal, buffers.sun_blocked, sun)
+    return ann
+
+
+def annotate_objects(spec: SceneSpec, buffers: Buffers) -> tuple[Annotation, ...]:
+    """The labels of each of the sample's other labelled objects (SceneSpec.objects), as the target's."""
+    return tuple(instance_annotation(spec, buffers, object_instance_id(j), buffers.objects_depth[j], obj.pose)
+                 for j, obj in enumerate(spec.objects))  # fmt: skip
+
+
+def instance_annotation(spec: SceneSpec, buffers: Buffers, instance: int, alone_depth: np.ndarray,
+                        pose: Pose) -> Annotation:  # fmt: skip
+    """One labelled instance's labels: its full mask (rendered alone), the pixels it is the first hit of,
+    its xyz map there; shadow_fraction 0 (annotate sets the target's)."""
+    mask = alone_depth > 0
+    mask_visib = (buffers.instance == instance) & mask
+    xyz = backproject_to_model(buffers.depth, spec.camera, pose.R_mat, pose.t_vec)
     xyz = np.where(mask_visib[..., None], xyz, 0.0).astype(np.float32)
     n_all = int(mask.sum())
     n_vis = int(mask_visib.sum())
@@ -139,7 +155,7 @@ def annotate(spec: SceneSpec, buffers: Buffers) -> Annotation:
         px_count_visib=n_vis,
         visib_fract=float(visib),
         r_occ=float(1.0 - visib) if n_all else 1.0,
-        shadow_fraction=shadow_fraction(mask_visib, buffers.normal, buffers.sun_blocked, spec.sun.direction),
+        shadow_fraction=0.0,
     )
 
 

@@ -26,7 +26,7 @@ def main(names: list[str]) -> None:
         if name not in BUILDERS:
             sys.exit(f"unknown bundled model '{name}' (choose from {', '.join(BUNDLED_MODELS)})")
         model, out = BUILDERS[name](), bundled_model_dir(name)
-        write_model_dir(model, out, OBJ_ID)
+        write_model_dir({OBJ_ID: model}, out)
         print(f"wrote {out}: {len(model.mesh.faces)} triangles, diameter {model.diameter * 1000:.1f} mm")
 
 

@@ -17,11 +17,11 @@ from scgen.io.sequence_frames import METADATA_FILE
 MANIFEST = "scgen.json"
 # 2: depth by default, scene_gt_info in bop_toolkit's conventions, models_eval/, test targets
 FORMAT = "scgen-bop/2"
+OBJ_ID = bop.TARGET_OBJ_ID  # the target's obj_id, as the dataset modules name it
 CHUNK = 1000  # samples per BOP scene folder (a sequence has its own): scene_id = sample_id // CHUNK
-OBJ_ID = 1  # the target's BOP object id
 # --rgb-format: an rgb/ file extension, or auto (the camera's: scgen.dataset.writer.rgb_format_for)
 RGB_FORMATS = ("auto", "png", "jpg")
-TARGET_INSTANCE = 0  # the target is the only annotated instance of each image
+TARGET_INSTANCE = 0  # the target is each image's first annotated instance (scene_gt entry 0)
 
 
 class Layout:
@@ -54,11 +54,11 @@ class Layout:
     def rgb(self, split: str, sample_id: int, ext: str = "png") -> Path:
         return bop.rgb_path(self.chunk_dir(split, sample_id), sample_id, ext)
 
-    def mask(self, split: str, sample_id: int, visib: bool = False) -> Path:
-        return bop.mask_path(self.chunk_dir(split, sample_id), sample_id, TARGET_INSTANCE, visib)
+    def mask(self, split: str, sample_id: int, visib: bool = False, inst: int = TARGET_INSTANCE) -> Path:
+        return bop.mask_path(self.chunk_dir(split, sample_id), sample_id, inst, visib)
 
-    def xyz(self, split: str, sample_id: int) -> Path:
-        return bop.xyz_path(self.chunk_dir(split, sample_id), sample_id, TARGET_INSTANCE)
+    def xyz(self, split: str, sample_id: int, inst: int = TARGET_INSTANCE) -> Path:
+        return bop.xyz_path(self.chunk_dir(split, sample_id), sample_id, inst)
 
     def depth(self, split: str, sample_id: int) -> Path:
         return bop.depth_path(self.chunk_dir(split, sample_id), sample_id)

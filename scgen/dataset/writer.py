@@ -14,6 +14,7 @@ import csv
 import functools
 import io
 from collections import defaultdict
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,7 +34,7 @@ from scgen.io.exr import encode_xyz_exr
 from scgen.scenes.attitude import CONE_COLUMNS
 from scgen.scenes.config.scene import distance_range_m
 from scgen.scenes.model import TargetModel
-from scgen.scenes.spec import SEQUENCE_COLUMNS, SceneSpec
+from scgen.scenes.spec import SEQUENCE_COLUMNS, Pose, SceneSpec
 
 METADATA_COLUMNS = (
     "sample_id", "split", "scene_id", "im_id", "illumination", "sun_irradiance_w_m2", "exposure_ev",
@@ -58,30 +59,39 @@ class WriteOptions:
 
 
 def dataset_depth_scale(
-    cfg: dict[str, Any], model: TargetModel, max_distance_m: float | None = None
-) -> float:
+    cfg: dict[str, Any], model: TargetModel, max_distance_m: float | None = None,
+    objects: Sequence[tuple[TargetModel, dict[str, Any]]] = (),
+) -> float:  # fmt: skip
     """The dataset's depth scale (mm per unit): every target point fits, at the largest sampled distance
     (`max_distance_m` where given: a sequence dataset's farthest frame; else the config's range) plus the
-    model's radius about its origin (|z| <= |t| + |v|); what lies farther is stored as 0."""
-    radius = float(np.linalg.norm(np.asarray(model.mesh.vertices), axis=1).max())
+    model's radius about its origin (|z| <= |t| + |v|); what lies farther is stored as 0. With
+    `[[objects]]` (`objects`: each entry's model and entry), every labelled object's points fit too."""
+    radius = _radius(model)
     farthest = distance_range_m(cfg, model.diameter)[1] if max_distance_m is None else max_distance_m
-    return bop.depth_scale_for(farthest + radius)
+    reach = farthest + radius
+    for other, entry in objects:
+        reach = max(reach, distance_range_m(cfg, other.diameter, entry["distance"])[1] + _radius(other))
+    return bop.depth_scale_for(reach)
 
 
-def dataset_target(layout: Layout) -> tuple[np.ndarray, np.ndarray, float]:
-    """(vertices in metres, faces, depth_scale): the dataset's models/ PLY and camera.json, read once per
-    process and dataset (the files are written before any sample and never change)."""
-    ply = layout.models_dir / bop.model_file(OBJ_ID)
-    return _read_target(layout.root, _mtime(ply), _mtime(layout.camera_path))
+def _radius(model: TargetModel) -> float:
+    return float(np.linalg.norm(np.asarray(model.mesh.vertices), axis=1).max())
+
+
+def dataset_target(layout: Layout, obj_id: int = OBJ_ID) -> tuple[np.ndarray, np.ndarray, float]:
+    """(vertices in metres, faces, depth_scale): object `obj_id`'s models/ PLY and camera.json, read once
+    per process and dataset (the files are written before any sample and never change)."""
+    ply = layout.models_dir / bop.model_file(obj_id)
+    return _read_target(layout.root, obj_id, _mtime(ply), _mtime(layout.camera_path))
 
 
 def _mtime(path: Path) -> int:
     return path.stat().st_mtime_ns if path.exists() else -1
 
 
-@functools.lru_cache(maxsize=4)
-def _read_target(root: Path, *_stamps: int) -> tuple[np.ndarray, np.ndarray, float]:
-    mesh = bop.read_model_mesh(root, OBJ_ID)
+@functools.lru_cache(maxsize=16)
+def _read_target(root: Path, obj_id: int, *_stamps: int) -> tuple[np.ndarray, np.ndarray, float]:
+    mesh = bop.read_model_mesh(root, obj_id)
     depth_scale = float(read_json(Layout(root).camera_path)["depth_scale"])
     return np.asarray(mesh.vertices), np.asarray(mesh.faces), depth_scale
 
@@ -126,35 +136,24 @@ def encode_rgb(image: np.ndarray, fmt: str, jpeg_quality: int = UNDRAWN_JPEG_QUA
 
 
 def write_sample(
-    layout: Layout, spec: SceneSpec, buffers: Buffers, ann: Annotation, split: str, opts: WriteOptions
-) -> dict[str, Any]:
-    """Write one sample's files atomically, record last; returns the record."""
+    layout: Layout, spec: SceneSpec, buffers: Buffers, ann: Annotation, split: str, opts: WriteOptions,
+    objects: Sequence[Annotation] = (),
+) -> dict[str, Any]:  # fmt: skip
+    """Write one sample's files atomically, record last; returns the record. `ann` is the target's labels,
+    `objects` those of each of spec.objects: scene_gt entries 0, 1, ..."""
     sid = spec.index
-    paths = {
-        "rgb": layout.rgb(split, sid, opts.rgb_format),
-        "mask": layout.mask(split, sid),
-        "mask_visib": layout.mask(split, sid, visib=True),
-    }
-    for p in paths.values():
-        p.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(paths["rgb"], encode_rgb(buffers.rgb, opts.rgb_format, drawn_jpeg_quality(spec)))
-    atomic_write_bytes(paths["mask"], encode_png(ann.mask.astype(np.uint8) * 255))
-    atomic_write_bytes(paths["mask_visib"], encode_png(ann.mask_visib.astype(np.uint8) * 255))
-    xyz_box = None
-    if ann.px_count_visib > 0:
-        x, y, w, h = ann.bbox_visib
-        xyz_box = [x, y, w, h]
-        xyz_path = layout.xyz(split, sid)
-        xyz_path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(xyz_path, encode_xyz_exr(ann.xyz[y : y + h, x : x + w], opts.xyz_dtype))
-    vertices, faces, depth_scale = dataset_target(layout)
+    rgb_path = layout.rgb(split, sid, opts.rgb_format)
+    rgb_path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(rgb_path, encode_rgb(buffers.rgb, opts.rgb_format, drawn_jpeg_quality(spec)))
+    depth_scale = dataset_target(layout)[2]
     depth = bop.encode_depth(buffers.depth, depth_scale)
     if opts.save_depth:
         depth_path = layout.depth(split, sid)
         depth_path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(depth_path, encode_png(depth))
-    vertices_cam = vertices @ spec.target.R_mat.T + spec.target.t_vec
-    gt_info = gt_info_entry(spec.camera, ann, vertices_cam, faces, depth, xyz_box)
+    others = ((o.obj_id, o.pose, a) for o, a in zip(spec.objects, objects, strict=True))
+    instances = [(OBJ_ID, spec.target, ann), *others]
+    gt_info = [write_instance(layout, spec, split, k, *inst, depth, opts) for k, inst in enumerate(instances)]
     record = build_record(spec, ann, split, gt_info, depth_scale, buffers.camera)
     record_path = layout.record(split, sid)
     record_path.parent.mkdir(parents=True, exist_ok=True)
@@ -162,12 +161,36 @@ def write_sample(
     return record
 
 
+def write_instance(
+    layout: Layout, spec: SceneSpec, split: str, k: int, obj_id: int, pose: Pose, ann: Annotation,
+    depth: np.ndarray, opts: WriteOptions,
+) -> dict[str, Any]:  # fmt: skip
+    """Write scene_gt instance k's masks and xyz map; returns its scene_gt_info entry (measured on its
+    model in models/, what bop_toolkit renders)."""
+    sid = spec.index
+    for visib, mask in ((False, ann.mask), (True, ann.mask_visib)):
+        path = layout.mask(split, sid, visib, k)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(path, encode_png(mask.astype(np.uint8) * 255))
+    xyz_box = None
+    if ann.px_count_visib > 0:
+        x, y, w, h = ann.bbox_visib
+        xyz_box = [x, y, w, h]
+        xyz_path = layout.xyz(split, sid, k)
+        xyz_path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(xyz_path, encode_xyz_exr(ann.xyz[y : y + h, x : x + w], opts.xyz_dtype))
+    vertices, faces, _ = dataset_target(layout, obj_id)
+    vertices_cam = vertices @ pose.R_mat.T + pose.t_vec
+    return gt_info_entry(spec.camera, ann, vertices_cam, faces, depth, xyz_box)
+
+
 def build_record(
-    spec: SceneSpec, ann: Annotation, split: str, gt_info: dict[str, Any], depth_scale: float,
+    spec: SceneSpec, ann: Annotation, split: str, gt_info: list[dict[str, Any]], depth_scale: float,
     camera: CameraRecord | None = None,
 ) -> dict[str, Any]:  # fmt: skip
-    """Everything finalize needs for the BOP JSON files and the metadata row of one sample; `camera`: what
-    the camera stage decided (None: the base exposure, no flare)."""
+    """Everything finalize needs for the BOP JSON files and the metadata row of one sample; `gt_info`: every
+    instance's scene_gt_info entry (the target's first); `camera`: what the camera stage decided (None:
+    the base exposure, no flare)."""
     scene_id = spec.sequence.sequence if spec.sequence else spec.index // CHUNK
     meta = metadata_row(spec, ann, split, scene_id, camera)
     exposure = exposure_ev(spec, camera)
@@ -177,9 +200,10 @@ def build_record(
     return {
         "sample_id": spec.index,
         "split": split,
-        "scene_gt": [bop.gt_entry(spec.target.R_mat, spec.target.t_vec, OBJ_ID)],
+        "scene_gt": [bop.gt_entry(spec.target.R_mat, spec.target.t_vec, OBJ_ID)]
+        + [bop.gt_entry(o.pose.R_mat, o.pose.t_vec, o.obj_id) for o in spec.objects],
         "scene_camera": scene_camera,
-        "scene_gt_info": [gt_info],
+        "scene_gt_info": gt_info,
         "metadata": meta,
         "spec": spec.to_dict(),
     }  # fmt: skip

@@ -34,6 +34,7 @@ TARGETS_MIN_VISIB_FRACT = 0.1  # BOP19 targets: instances at least this visible 
 DEPTH_MAX = 65535  # largest uint16 depth value; 0 means no measurement
 EMPTY_BOX = (-1, -1, -1, -1)  # bop_toolkit's box of an empty silhouette
 PLY_VERTEX_PROPERTIES = ("x", "y", "z", "nx", "ny", "nz", "red", "green", "blue")  # what inout.load_ply reads
+TARGET_OBJ_ID = 1  # the target's BOP object id; the config's [[objects]] models follow it (2, 3, ...)
 
 
 def model_file(obj_id: int) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Mapping
 from typing import Protocol
 
 from scgen.errors import ScgenError
@@ -55,21 +56,23 @@ def check_backend(name: str, device: str = "auto") -> None:
 
 
 def create_backend(
-    name: str, model: TargetModel, quality: str = "default", device: str = "auto", threads: int | None = None
-) -> Backend:
+    name: str, model: TargetModel, quality: str = "default", device: str = "auto", threads: int | None = None,
+    models: Mapping[int, TargetModel] | None = None,
+) -> Backend:  # fmt: skip
     """Instantiate a backend by name; raises ScgenError for unknown names or a missing renderer.
 
     `threads`: the renderer's CPU threads; None = the backend's default for one worker (renderer_threads).
+    `models`: every object's model by obj_id (the target's is `model`), for SceneSpec.objects.
     """
     check_backend(name)  # the device is the backend's to choose (Blender probes the GPUs once)
     threads = renderer_threads(name, 1, threads)
     if name == "mitsuba":
         from scgen.render.mitsuba.backend import MitsubaBackend
 
-        return MitsubaBackend(model, quality=quality, threads=threads)
+        return MitsubaBackend(model, quality=quality, threads=threads, models=models)
     from scgen.render.blender.backend import BlenderBackend
 
-    return BlenderBackend(model, quality=quality, device=device, threads=threads)
+    return BlenderBackend(model, quality=quality, device=device, threads=threads, models=models)
 
 
 def renderer_threads(name: str, workers: int, threads: int | None = None) -> int:

@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from scgen.io.bop import TARGET_OBJ_ID
 from scgen.render.conventions import CLIP_START_M
+from scgen.render.objects import object_hulls
 from scgen.render.props import prop_mesh
 from scgen.scenes.geometry import project
 from scgen.scenes.spec import SceneSpec
@@ -166,20 +168,23 @@ def disjoint(regions: list[Region]) -> tuple[Region, ...]:
         merged[pair[0]] = merged[pair[0]].around(b)
 
 
-def scene_objects(spec: SceneSpec, hull: np.ndarray) -> list[np.ndarray]:
-    """`spec`'s objects in its camera frame: the target, given as `hull` (the vertices of the model's
-    convex hull, model frame), then each prop's mesh."""
-    target = hull @ spec.target.R_mat.T + spec.target.t_vec
-    return [target, *(np.asarray(prop_mesh(p).vertices) for p in spec.props)]
+def scene_objects(spec: SceneSpec, hulls: Mapping[int, np.ndarray]) -> list[np.ndarray]:
+    """`spec`'s objects in its camera frame: the target and each labelled object beside it, given by
+    `hulls` (the vertices of each model's convex hull, model frame, by obj_id; the target's is OBJ_ID's),
+    then each prop's mesh."""
+    target = hulls[TARGET_OBJ_ID] @ spec.target.R_mat.T + spec.target.t_vec
+    return [target, *object_hulls(spec, hulls), *(np.asarray(prop_mesh(p).vertices) for p in spec.props)]
 
 
-def scene_region(spec: SceneSpec, hull: np.ndarray, reach_px: float, margin_px: int) -> Region:
+def scene_region(spec: SceneSpec, hulls: Mapping[int, np.ndarray], reach_px: float, margin_px: int) -> Region:
     """covered_region of `spec`'s camera (the one rendered) around its objects (scene_objects)."""
     cam = spec.camera
-    return covered_region(cam.K_mat, cam.width, cam.height, scene_objects(spec, hull), reach_px, margin_px)
+    return covered_region(cam.K_mat, cam.width, cam.height, scene_objects(spec, hulls), reach_px, margin_px)
 
 
-def scene_regions(spec: SceneSpec, hull: np.ndarray, reach_px: float, margin_px: int) -> tuple[Region, ...]:
+def scene_regions(
+    spec: SceneSpec, hulls: Mapping[int, np.ndarray], reach_px: float, margin_px: int
+) -> tuple[Region, ...]:
     """covered_regions of `spec`'s camera around its objects (scene_objects)."""
     cam = spec.camera
-    return covered_regions(cam.K_mat, cam.width, cam.height, scene_objects(spec, hull), reach_px, margin_px)
+    return covered_regions(cam.K_mat, cam.width, cam.height, scene_objects(spec, hulls), reach_px, margin_px)

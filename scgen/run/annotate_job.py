@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from scgen.annotate.bop_labels import InstanceLabels, VisibDisagreement, instance_labels, projection_box
+from scgen.annotate.bop_labels import InstanceLabels, VisibDisagreement, instance_labels
 from scgen.dataset.bop_dataset import BopDataset, BopImage, open_bop_dataset, read_models
 from scgen.dataset.layout import dumps
 from scgen.dataset.writer import encode_png
@@ -39,6 +39,7 @@ from scgen.io.cores import usable_cores
 from scgen.io.exr import encode_xyz_exr
 from scgen.io.parent_watch import spawn_pool
 from scgen.render.mitsuba import raycast
+from scgen.scenes.projection import projection_box
 
 RECORDS_DIR = "annotate"
 Models = dict[int, tuple[np.ndarray, np.ndarray]]

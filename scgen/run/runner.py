@@ -154,6 +154,7 @@ def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:
         "quality": job.quality,
         "model": {"name": plan.generator.model.name, "fingerprint": plan.generator.model.fingerprint,
                   "diameter_m": plan.generator.model.diameter},
+        **objects_manifest(plan.generator),
         "config_sha256": hashlib.sha256(cfg_text.encode()).hexdigest(),
         "split_by": job.split_by,
         "split_ratios": list(job.ratios),
@@ -162,6 +163,16 @@ def manifest_for(job: RenderJob, plan: Plan) -> dict[str, Any]:
         "save_depth": plan.write.save_depth,
         **sequence_manifest(plan.generator.cfg, job.n),
     }  # fmt: skip
+
+
+def objects_manifest(generator: Generator) -> dict[str, Any]:
+    """The manifest's `objects` entry (a dataset with `[[objects]]` only): each further object's obj_id,
+    name, fingerprint and diameter, so a resume refuses another model behind the same path."""
+    others = {k: m for k, m in generator.models.items() if k != OBJ_ID}
+    if not others:
+        return {}
+    return {"objects": {str(k): {"name": m.name, "fingerprint": m.fingerprint, "diameter_m": m.diameter}
+                        for k, m in others.items()}}  # fmt: skip
 
 
 def sequence_manifest(cfg: dict[str, Any], n: int) -> dict[str, Any]:
@@ -177,15 +188,16 @@ def write_static_files(layout: Layout, generator: Generator, farthest_m: float |
     evaluation models."""
     make_output_folder(layout.root)
     cam = generator.cfg["camera"]
-    depth_scale = dataset_depth_scale(generator.cfg, generator.model, farthest_m)
+    objects = [(generator.models[d.obj_id], d.entry) for d in generator.object_draws]
+    depth_scale = dataset_depth_scale(generator.cfg, generator.model, farthest_m, objects)
     camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
               "height": cam["height"], "depth_scale": depth_scale}  # fmt: skip
     if not is_pinhole(tuple(cam["dist"])):  # the lens, as each image's scene_camera entry has it
         camera["cam_dist"] = [float(k) for k in cam["dist"]]
     atomic_write_text(layout.camera_path, dumps(camera))
     atomic_write_text(layout.config_path, dumps(generator.cfg))
-    write_model_dir(generator.model, layout.models_dir, OBJ_ID)
-    write_eval_model_dir(generator.model, layout.models_eval_dir, OBJ_ID)
+    write_model_dir(generator.models, layout.models_dir)
+    write_eval_model_dir(generator.models, layout.models_eval_dir)
 
 
 def prepare_output(job: RenderJob, plan: Plan) -> Layout:

@@ -51,7 +51,8 @@ class SampleWorker:
         t0 = time.perf_counter()
         sample = self.settings.generator.render(spec)
         t1 = time.perf_counter()
-        write_sample(self.layout, spec, sample.buffers, sample.annotation, task.split, self.settings.write)
+        write_sample(self.layout, spec, sample.buffers, sample.annotation, task.split, self.settings.write,
+                     sample.objects)  # fmt: skip
         return Done(task.index, t1 - t0, time.perf_counter() - t1)
 
     def close(self) -> None:

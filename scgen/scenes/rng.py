@@ -12,7 +12,7 @@ import numpy as np
 
 FACTORS = (
     "pose", "distance", "position", "illumination", "shadow", "background", "occluders", "camera",
-    "sky", "finish", "sun_view",
+    "sky", "finish", "sun_view", "objects",
 )  # fmt: skip
 
 

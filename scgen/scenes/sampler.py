@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -20,16 +21,27 @@ from scgen.scenes.geometry import (
 from scgen.scenes.imaging import sample_imaging
 from scgen.scenes.materials import PROP_MATERIALS
 from scgen.scenes.placement import Blank, place_caster, place_occluder
+from scgen.scenes.props import bounding_radius
 from scgen.scenes.rng import factor_rng
 from scgen.scenes.silhouette import CameraView, TargetShape, camera_view, sun_view
 from scgen.scenes.sky import BODY_OF_KIND, sky_params
-from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, PropSpec, SceneSpec, SunSpec
+from scgen.scenes.spec import BackgroundSpec, CameraSpec, PlacedObject, Pose, PropSpec, SceneSpec, SunSpec
 
 OCCLUDER_SHAPES = ("panel", "box", "rod", "debris", "arm")
 CASTER_SHAPES = ("panel", "box", "truss", "arm")
 CLUTTER_SHAPES = ("truss", "panel", "box", "debris", "arm")
 BODY_MIN_LIT = 0.08  # share of the frame an Earth or Moon background must show as lit day side
 BODY_TRIES = 32
+OBJECT_TRIES = 64  # placements an `[[objects]]` instance draws until it clears every object before it
+
+
+@dataclass(frozen=True)
+class ObjectDraw:
+    """What the sampler needs of one `[[objects]]` entry: its obj_id, its model's shape and the entry."""
+
+    obj_id: int
+    shape: TargetShape
+    entry: dict[str, Any]
 
 
 def _choice(rng: np.random.Generator, probs: dict[str, float]) -> str:
@@ -38,11 +50,15 @@ def _choice(rng: np.random.Generator, probs: dict[str, float]) -> str:
     return names[int(rng.choice(len(names), p=p / p.sum()))]
 
 
-def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape) -> SceneSpec:
-    """The SceneSpec of one sample; depends only on (seed, index, cfg, target geometry).
+def sample_scene(
+    seed: int, index: int, cfg: dict[str, Any], shape: TargetShape, objects: Sequence[ObjectDraw] = ()
+) -> SceneSpec:
+    """The SceneSpec of one sample; depends only on (seed, index, cfg, the objects' geometry).
 
     `shape` is the target's geometry (scgen.Generator builds it from the model): its diameter sets the
-    distance range, its silhouette aims the occluders and shadow casters.
+    distance range, its silhouette aims the occluders and shadow casters. `objects`: the config's
+    `[[objects]]` entries, placed last (from their own stream), so the target's draws are what they are
+    without them.
     """
     diameter_m = shape.diameter
     camera = CameraSpec.from_config(cfg["camera"])
@@ -80,6 +96,7 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
         sun = replace(sun, direction=tuple(float(x) for x in near_view))
         background, clutter = _sample_sky_side(seed, index, cfg["background"], camera, t, shape.radius,
                                                radius_px, near_view)  # fmt: skip
+    props = tuple(occluders + caster + clutter)
     return SceneSpec(
         seed=int(seed),
         index=int(index),
@@ -88,13 +105,60 @@ def sample_scene(seed: int, index: int, cfg: dict[str, Any], shape: TargetShape)
         distance_m=distance,
         sun=sun,
         background=background,
-        props=tuple(occluders + caster + clutter),
+        props=props,
         requested_occlusion=occ_group,
         shadow_caster=bool(caster),
         imaging=sample_imaging(factor_rng(seed, index, "camera"), camera_settings),
         finish=sample_finish(factor_rng(seed, index, "finish"), cfg["finish"]),
         cone=cone,
+        objects=_sample_objects(
+            factor_rng(seed, index, "objects"),
+            cfg,
+            camera,
+            objects,
+            [(t, shape.radius)] + [_prop_ball(p) for p in props],
+        ),  # fmt: skip
     )
+
+
+def _prop_ball(prop: PropSpec) -> tuple[np.ndarray, float]:
+    return prop.pose.t_vec, bounding_radius(prop.shape, np.asarray(prop.size))
+
+
+def _sample_objects(
+    rng: np.random.Generator, cfg: dict[str, Any], camera: CameraSpec, objects: Sequence[ObjectDraw],
+    taken: list[tuple[np.ndarray, float]],
+) -> tuple[PlacedObject, ...]:  # fmt: skip
+    """Every `[[objects]]` instance, in entry order: its distance uniform over the entry's range, its centre
+    in the frame as the target's is, its attitude from the entry's pose table. An instance's bounding ball
+    clears every ball before it (the target's, the props', the instances placed), redrawn up to
+    OBJECT_TRIES times; if none clears, the draw that comes closest is kept (ranges that leave no room)."""
+    placed = []
+    for obj in objects:
+        entry = obj.entry
+        d_min, d_max = distance_range_m(cfg, obj.shape.diameter, entry["distance"])
+        for _ in range(entry["count"]):
+            best: tuple[float, np.ndarray] | None = None
+            for _ in range(OBJECT_TRIES):
+                distance = rng.uniform(d_min, d_max)
+                radius_px = camera.focal * 0.5 * obj.shape.diameter / distance
+                margin = min(cfg["position"]["inside_radius_frac"] * radius_px,
+                             0.45 * min(camera.width, camera.height))  # fmt: skip
+                u = rng.uniform(margin, camera.width - 1 - margin)
+                v = rng.uniform(margin, camera.height - 1 - margin)
+                ray = backproject(camera.K_mat, u, v, 1.0)
+                t = distance * ray / np.linalg.norm(ray)
+                clearance = min(np.linalg.norm(t - c) - (r + obj.shape.radius) for c, r in taken)
+                if best is None or clearance > best[0]:
+                    best = (clearance, t)
+                if clearance > 0:
+                    break
+            assert best is not None
+            t = best[1]
+            R, _ = sample_attitude(rng, entry["pose"], t)
+            taken.append((t, obj.shape.radius))
+            placed.append(PlacedObject(obj.obj_id, Pose.from_arrays(R, t)))
+    return tuple(placed)
 
 
 def _sample_sun(rng: np.random.Generator, cfg: dict[str, Any], t: np.ndarray) -> SunSpec:

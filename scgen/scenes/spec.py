@@ -157,6 +157,16 @@ class PropSpec:
 
 
 @dataclass(frozen=True)
+class PlacedObject:
+    """A labelled object beside the target (the config's `[[objects]]`): its BOP obj_id and its pose
+    (model -> camera). It is drawn, occludes and is labelled as the target is: scene_gt entry 1 + its
+    index in SceneSpec.objects, instance id buffers.object_instance_id(that index)."""
+
+    obj_id: int
+    pose: Pose
+
+
+@dataclass(frozen=True)
 class BackgroundSpec:
     """Background kind (clean/complex/earth/cluttered/user) with its own seed and kind-specific parameters."""
 
@@ -250,17 +260,18 @@ class SceneSpec:
     finish: dict[str, dict[str, Any]] = field(default_factory=dict)  # scgen.scenes.finish; {}: nominal
     cone: ConeDraw | None = None  # a cone attitude's place in its corridor (scgen.scenes.attitude)
     sequence: SequenceFrame | None = None  # a rendezvous sequence's frame (scgen.scenes.motion.sequence)
+    objects: tuple[PlacedObject, ...] = ()  # the other labelled objects (config `[[objects]]`)
 
     @property
     def occluders(self) -> tuple[PropSpec, ...]:
         return tuple(p for p in self.props if p.role == "occluder")
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data; `cone` and `sequence` only when set, so an independent sample's record is what it
-        always was."""
+        """Plain data; `cone`, `sequence` and `objects` only when set, so a one-object independent sample's
+        record is what it always was."""
         d = asdict(self)
-        for key in ("cone", "sequence"):
-            if d[key] is None:
+        for key in ("cone", "sequence", "objects"):
+            if not d[key]:
                 del d[key]
         return d
 
@@ -298,6 +309,7 @@ class SceneSpec:
             finish=d.get("finish", {}),
             cone=ConeDraw(**d["cone"]) if d.get("cone") else None,
             sequence=_sequence_frame(d["sequence"]) if d.get("sequence") else None,
+            objects=tuple(PlacedObject(int(o["obj_id"]), pose(o["pose"])) for o in d.get("objects", ())),
         )
 
 

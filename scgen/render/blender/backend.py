@@ -13,17 +13,20 @@ from __future__ import annotations
 import shutil
 import tempfile
 import weakref
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from scgen.io.bop import TARGET_OBJ_ID
 from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers
 from scgen.render.blender.env import import_bpy, select_device
 from scgen.render.blender.scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender.settings import FILTER_REACH_PX, preset
 from scgen.render.camera import record_image, render_camera
+from scgen.render.objects import model_hulls, objects_alone_depth
 from scgen.render.region import Region, full_frame, region_render, scene_regions
 from scgen.render.sky.backgrounds import background_image
 from scgen.scenes.geometry import project
@@ -52,10 +55,12 @@ class BlenderBackend:
         device: str = "auto",
         threads: int | None = None,
         region: bool | None = None,
+        models: Mapping[int, TargetModel] | None = None,
     ) -> None:
         """`device`: auto (a GPU when Cycles finds one), cpu or gpu; `threads`: CPU threads (None: all);
         `region`: trace only the pixels the objects may cover (covered_regions), else the whole frame
-        (None: as region_render() says)."""
+        (None: as region_render() says); `models`: every object's model by obj_id, for SceneSpec.objects
+        (None: the target's alone)."""
         quality_preset = preset(quality)
         self._bpy = import_bpy()
         self._bpy.ops.wm.read_factory_settings(use_empty=True)  # also resets the device preferences
@@ -64,8 +69,9 @@ class BlenderBackend:
         # removed on close(), or when the backend is collected or the interpreter exits unclosed
         self._remove_workdir = weakref.finalize(self, shutil.rmtree, self._workdir, True)
         gpu = self.device != "CPU"
-        self.scene = BlenderScene(self._bpy, model, quality_preset, gpu, threads, self._workdir)
-        self._hull = np.asarray(model.mesh.convex_hull.vertices, np.float64)
+        self.models = {**(models or {}), TARGET_OBJ_ID: model}
+        self.scene = BlenderScene(self._bpy, model, quality_preset, gpu, threads, self._workdir, self.models)
+        self._hulls = model_hulls(self.models)
         self._model, self._rays = model, None
         self.trace_region = region_render() if region is None else region
         self.margin_px = DENOISE_MARGIN_PX  # around each traced box (benchmarks vary it)
@@ -82,8 +88,10 @@ class BlenderBackend:
         beauty = self.scene.render_beauty()
         if shown.camera == spec.camera:  # not `is`: render_camera's cache returns an equal camera of before
             instance, depth = instance_and_depth(beauty)
-            aux = self.scene.render_aux(target_alone=props_may_hide_target(spec, self._hull, instance, depth))
+            hidden = props_may_hide_target(spec, self._hulls[TARGET_OBJ_ID], instance, depth)
+            aux = self.scene.render_aux(target_alone=hidden)
             buffers = buffers_from_passes(spec, beauty, aux)
+            buffers.objects_depth = objects_alone_depth(spec, self.models)
         else:  # a lens Cycles' pinhole image does not sample: labels by exact ray casts along its rays
             buffers = self._ray_caster().render_geometry(spec)
         image = composite(beauty, background_image(shown))
@@ -94,14 +102,14 @@ class BlenderBackend:
         """The parts of `spec`'s frame Cycles traces: around the target's hull and the props' meshes."""
         if not self.trace_region:
             return (full_frame(spec.camera.width, spec.camera.height),)
-        return scene_regions(spec, self._hull, FILTER_REACH_PX, self.margin_px)
+        return scene_regions(spec, self._hulls, FILTER_REACH_PX, self.margin_px)
 
     def _ray_caster(self) -> MitsubaBackend:
         """The Mitsuba backend's exact geometric passes, made on first need (cameras with a lens)."""
         if self._rays is None:
             from scgen.render.mitsuba.backend import MitsubaBackend
 
-            self._rays = MitsubaBackend(self._model)  # Dr.Jit's threads are per process: Mitsuba's default
+            self._rays = MitsubaBackend(self._model, models=self.models)  # Dr.Jit's threads: the default
         return self._rays
 
     def close(self) -> None:
@@ -123,12 +131,13 @@ def instance_and_depth(beauty: dict[str, np.ndarray]) -> tuple[np.ndarray, np.nd
 
 
 def props_may_hide_target(spec: SceneSpec, hull: np.ndarray, instance: np.ndarray, depth: np.ndarray) -> bool:
-    """False only when no prop can hide any target pixel, so the target-alone depth needs no render.
+    """False only when no prop (nor labelled object beside the target) can hide any target pixel, so the
+    target-alone depth needs no render.
 
     A hidden target pixel lies in the box of the projected hull vertices (model frame `hull`)
     under a prop pixel nearer than the target's farthest point.
     """
-    if not spec.props:
+    if not spec.props and not spec.objects:
         return False
     x = hull @ spec.target.R_mat.T + spec.target.t_vec
     if x[:, 2].min() <= 0:  # partly behind the camera: the projected box is not a bound

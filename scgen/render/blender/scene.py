@@ -17,6 +17,7 @@ imported here, so the layer names can be imported without it.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -24,7 +25,7 @@ from typing import Any
 import numpy as np
 import OpenEXR
 
-from scgen.io.buffers import TARGET_ID
+from scgen.io.buffers import TARGET_ID, prop_instance_id
 from scgen.render.blender.env import quiet_stdout
 from scgen.render.blender.frames import camera_matrix_world, intrinsics_from_K, light_matrix_world
 from scgen.render.blender.materials import build_materials, new_material, probe_material, set_finish
@@ -37,11 +38,12 @@ from scgen.render.blender.settings import (
 )
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, EARTHSHINE_COLOUR, render_seed
 from scgen.render.lighting import body_albedo_light, sun_render_irradiance
+from scgen.render.objects import object_parts
 from scgen.render.props import prop_mesh
 from scgen.render.region import Region, full_frame, paste
 from scgen.scenes.finish import finished
 from scgen.scenes.model import TargetModel
-from scgen.scenes.spec import CameraSpec, PropSpec, SceneSpec
+from scgen.scenes.spec import CameraSpec, SceneSpec
 
 BEAUTY, PROBE, ALONE = "beauty", "probe", "alone"  # view layer names, prefixes of the EXR channels
 MISS_DEPTH = 1e10  # Cycles' Z pass where a pixel's centred ray meets nothing
@@ -58,10 +60,12 @@ class BlenderScene:
         gpu: bool,
         threads: int | None,
         workdir: Path,
+        models: Mapping[int, TargetModel],
     ) -> None:
+        """`models`: every object's model by obj_id, for SceneSpec.objects."""
         from mathutils import Matrix
 
-        self._bpy, self._Matrix = bpy, Matrix
+        self._bpy, self._Matrix, self._models = bpy, Matrix, models
         self.beauty_exr, self.aux_exr = workdir / "beauty.exr", workdir / "aux.exr"
         self.beauty = bpy.context.scene
         self.beauty.name = "scgen"
@@ -117,7 +121,7 @@ class BlenderScene:
         """Move and re-light everything for `spec`."""
         self._set_camera(spec.camera)
         self.target.matrix_world = self._Matrix(spec.target.matrix.tolist())
-        self._set_props(spec.props)
+        self._set_props(spec)
         self._set_lights(spec)
         self._set_finish(spec.finish)
         self.beauty.cycles.seed = render_seed(spec)
@@ -217,19 +221,28 @@ class BlenderScene:
             scene.render.resolution_x, scene.render.resolution_y = cam.width, cam.height
         self._camera_key = key
 
-    def _set_props(self, props: tuple[PropSpec, ...]) -> None:
-        for k, prop in enumerate(props):
+    def _set_props(self, spec: SceneSpec) -> None:
+        """The pool's objects take the props, then the labelled objects' parts beside the target (one pool
+        object per part: a material each), in the props collection, so they shade and hide the target as
+        props do and the `alone` layer leaves them out."""
+        placed = []
+        for k, prop in enumerate(spec.props):
+            mesh = prop_mesh(prop)  # the shared geometry, in the camera frame: back to the prop's frame,
+            local = (np.asarray(mesh.vertices) - prop.pose.t_vec) @ prop.pose.R_mat  # so textures stick to it
+            instance = prop_instance_id(len(spec.objects), k)
+            placed.append((local, mesh.faces, prop.pose, prop.material, instance))
+        for part in object_parts(spec, self._models):
+            placed.append((part.mesh.vertices, part.mesh.faces, part.pose, part.material, part.instance))
+        for k, (vertices, faces, pose, material, instance) in enumerate(placed):
             if k == len(self.props):
                 self.props.append(self._new_prop(k))
             obj = self.props[k]
-            mesh = prop_mesh(prop)  # the shared geometry, in the camera frame: back to the prop's frame,
-            local = (np.asarray(mesh.vertices) - prop.pose.t_vec) @ prop.pose.R_mat  # so textures stick to it
-            set_triangles(obj.data, local, mesh.faces)
-            obj.matrix_world = self._Matrix(prop.pose.matrix.tolist())
-            obj.data.materials[0] = self.materials[prop.material]
-            obj.pass_index = TARGET_ID + 1 + k  # instance ids of props: 2 + index in SceneSpec.props
+            set_triangles(obj.data, vertices, faces)
+            obj.matrix_world = self._Matrix(pose.matrix.tolist())
+            obj.data.materials[0] = self.materials[material]
+            obj.pass_index = instance
             obj.hide_render = False
-        for obj in self.props[len(props) :]:
+        for obj in self.props[len(placed) :]:
             obj.hide_render = True
 
     def _new_prop(self, k: int) -> Any:

@@ -19,7 +19,7 @@ renders zero. The label passes are cast through every pixel, as before; they do 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
@@ -28,16 +28,17 @@ import mitsuba as mi
 import numpy as np
 from trimesh.transformations import transform_points
 
-from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers
+from scgen.io.bop import TARGET_OBJ_ID
+from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, Buffers, prop_instance_id
 from scgen.render.camera import record_image, render_camera
 from scgen.render.conventions import CLIP_END_M, CLIP_START_M, MITSUBA_THREADS, check_quality, render_seed
 from scgen.render.mitsuba.lights import SceneLights, sample_lights
-from scgen.render.mitsuba.llvm import mitsuba_setup
 from scgen.render.mitsuba.materials import TargetFinishes, box_uv, build_bsdfs, texture_scale
-from scgen.render.mitsuba.memory import aligned
 from scgen.render.mitsuba.ray_cull import may_hit
-from scgen.render.mitsuba.slots import MeshSlot, build_mesh, registry_id
+from scgen.render.mitsuba.raycast import cast_rays, intersect_from_origin, select_variant
+from scgen.render.mitsuba.slots import MeshSlot, build_mesh
 from scgen.render.mitsuba.window import PIXEL_FILTER, REACH_PX, film_window
+from scgen.render.objects import model_hulls, object_parts, objects_alone_depth
 from scgen.render.props import prop_mesh
 from scgen.render.region import Region, full_frame, region_render, scene_region
 from scgen.render.sky.backgrounds import background_image
@@ -51,22 +52,15 @@ FINISHES_PER_CLASS = 3  # target BSDFs (and meshes) made per material class at t
 RECORDINGS_KEPT = 32  # frozen renders a backend keeps, the least recently used dropped first
 
 
-def select_variant() -> str:
-    """Set the variant llvm chose for this process (llvm_ad_rgb when its libLLVM renders, else
-    scalar_rgb), unless one is set already; returns the variant in use."""
-    if mi.variant() is None:
-        mi.set_variant(mitsuba_setup().variant)
-    return mi.variant()
-
-
 class SampleMeshes:
     """Where a sample's shapes went: the target's slots (one per part class, in the model's class order)
-    and the props' (one per material with any), with the prop each of their triangles belongs to."""
+    and the props' (one per material with any; the other labelled objects' parts go there too), with the
+    instance each of their triangles belongs to."""
 
     def __init__(self) -> None:
         self.target: list[MeshSlot] = []
         self.props: list[MeshSlot] = []
-        self.owners: list[np.ndarray] = []  # per prop mesh: index into SceneSpec.props, per triangle
+        self.owners: list[np.ndarray] = []  # per prop mesh: the instance id (scgen.io.buffers) per triangle
         self.target_corners: list[np.ndarray] = []  # per target slot: its triangles' corners (3F x 3)
 
 
@@ -81,10 +75,12 @@ class MitsubaBackend:
         quality: str = "default",
         threads: int = MITSUBA_THREADS,
         region: bool | None = None,
+        models: Mapping[int, TargetModel] | None = None,
     ) -> None:
         """`threads`: Dr.Jit's CPU threads, for the whole process (above MITSUBA_THREADS, see there);
         `region`: path-trace only a window over the pixels the objects may cover (mitsuba.window), else
-        the whole frame (None: as region_render() says)."""
+        the whole frame (None: as region_render() says); `models`: every object's model by obj_id, for
+        SceneSpec.objects (None: the target's alone)."""
         self.variant = select_variant()
         dr.set_thread_count(threads)
         self.model = model
@@ -97,7 +93,8 @@ class MitsubaBackend:
         self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
         self._finishes = TargetFinishes(FINISHES_PER_CLASS)
         self._reach = 1.01 * float(np.linalg.norm(model.mesh.vertices, axis=1).max())  # target's radius
-        self._hull = np.asarray(model.mesh.convex_hull.vertices, np.float64)
+        self.models = {**(models or {}), TARGET_OBJ_ID: model}
+        self._hulls = model_hulls(self.models)
         self.trace_region = region_render() if region is None else region
         self.window = full_frame(1, 1)  # the last render's film window, for tests and benchmarks
         # the target's slots, one per BSDF it is drawn with (named as TargetFinishes names them, or by the
@@ -170,7 +167,13 @@ class MitsubaBackend:
             local = (np.asarray(m.vertices) - prop.pose.t_vec) @ prop.pose.R_mat  # UVs stick to the prop
             uv = box_uv(local, np.asarray(m.faces), texture_scale(prop.material, max(prop.size)))
             corners = np.asarray(m.vertices)[np.asarray(m.faces)].reshape(-1, 3)
-            by_material.setdefault(prop.material, []).append((k, corners, uv))
+            instance = prop_instance_id(len(spec.objects), k)
+            by_material.setdefault(prop.material, []).append((instance, corners, uv))
+        for part in object_parts(spec, self.models):
+            faces = np.asarray(part.mesh.faces)
+            uv = box_uv(np.asarray(part.mesh.vertices), faces, texture_scale(part.material, part.diameter))
+            corners = transform_points(part.mesh.vertices, part.pose.matrix)[faces].reshape(-1, 3)
+            by_material.setdefault(part.material, []).append((part.instance, corners, uv))
         for material, slot in self._prop_slots.items():
             pieces = by_material.get(material, [])
             slot.fill(np.concatenate([c for _, c, _ in pieces] or [np.zeros((0, 3))]),
@@ -232,7 +235,7 @@ class MitsubaBackend:
         instance[on_target] = TARGET_ID
         for j, owners in enumerate(layout.owners):
             on_mesh = idx_all == n_target + j
-            instance[on_mesh] = 2 + owners[prim[on_mesh]]
+            instance[on_mesh] = owners[prim[on_mesh]]
         normal = np.where((np.sum(normal * rays_cam, axis=1) > 0)[:, None], -normal, normal)
 
         sun = np.asarray(spec.sun.direction, np.float64)
@@ -249,6 +252,7 @@ class MitsubaBackend:
             target_depth=target_depth,
             normal=normal.reshape(H, W, 3).astype(np.float32),
             sun_blocked=sun_blocked.reshape(H, W),
+            objects_depth=objects_alone_depth(spec, self.models),
         )
 
     def _cast_scene(self, name: str, slots: list[MeshSlot]) -> mi.Scene:
@@ -311,7 +315,7 @@ class MitsubaBackend:
         """The pixels of `spec`'s frame (its render camera's) whose value the objects may set."""
         if not self.trace_region:
             return full_frame(spec.camera.width, spec.camera.height)
-        return scene_region(spec, self._hull, REACH_PX, 0)
+        return scene_region(spec, self._hulls, REACH_PX, 0)
 
     def _window_sensor(self, camera: CameraSpec, window: Region) -> mi.Sensor:
         """The window's camera: one sensor kept per render camera and set to the window, its film's size
@@ -399,53 +403,6 @@ def _sensor(cam, spp: int, window: Region | None = None) -> dict:
         },
         "sampler": {"type": "independent", "sample_count": spp},
     }
-
-
-def cast_rays(
-    scene: mi.Scene, shapes: list, dirs: np.ndarray, intersect: Callable | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Ray length, index of the hit shape in `shapes` (-1 = miss), geometric normal and index of the hit
-    triangle in its shape, rays from the origin. `shapes`: meshes, or slots (whose meshes are known by
-    their registry ids); `intersect`: intersect_from_origin or a frozen one."""
-    if not dr.is_jit_v(mi.Float):
-        return _cast_rays_one_by_one(scene, [s.mesh if isinstance(s, MeshSlot) else s for s in shapes], dirs)
-    d = mi.Vector3f(*(mi.Float(aligned(dirs[:, k].astype(np.float32))) for k in range(3)))
-    t, hit_ids, nx, ny, nz, prim, valid = (
-        np.asarray(x) for x in (intersect or intersect_from_origin)(scene, d)
-    )
-    t = np.where(valid, t.astype(np.float64), np.inf)
-    idx = np.full(len(dirs), -1, np.int64)
-    if shapes:  # scene.shapes() is not in insertion order: map each hit's shape registry id to its index
-        ids = np.array([s.registry_id if isinstance(s, MeshSlot) else registry_id(s) for s in shapes])
-        hit_ids = hit_ids.astype(np.int64)
-        lut = np.full(max(int(ids.max()), int(hit_ids.max())) + 1, -1, np.int64)
-        lut[ids] = np.arange(len(shapes))
-        idx = np.where(valid, lut[hit_ids], -1)
-    n = np.stack([nx, ny, nz], 1).astype(np.float64)
-    return t, idx, np.where(valid[:, None], n, 0.0), np.where(valid, prim, 0).astype(np.int64)
-
-
-def intersect_from_origin(scene: mi.Scene, d: mi.Vector3f, **key: Any) -> tuple:
-    """The first hits of rays from the origin along `d`: length, hit shape's registry id, geometric normal
-    (x, y, z), triangle and whether there is one. `key`: what a frozen version is keyed by, unused here."""
-    si = scene.ray_intersect(mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), d))
-    shape_id = dr.reinterpret_array(mi.UInt32, si.shape)
-    return si.t, shape_id, si.n.x, si.n.y, si.n.z, si.prim_index, si.is_valid()
-
-
-def _cast_rays_one_by_one(
-    scene: mi.Scene, shapes: list, dirs: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """cast_rays for scalar_rgb (the fallback without a usable libLLVM), whose rays go one at a time."""
-    index = {id(s): k for k, s in enumerate(shapes)}
-    t, idx, n = np.full(len(dirs), np.inf), np.full(len(dirs), -1, np.int64), np.zeros((len(dirs), 3))
-    prim = np.zeros(len(dirs), np.int64)
-    o = mi.Point3f(0.0, 0.0, 0.0)
-    for i, d in enumerate(dirs.tolist()):
-        si = scene.ray_intersect(mi.Ray3f(o, mi.Vector3f(d)))
-        if si.is_valid():
-            t[i], idx[i], n[i], prim[i] = si.t, index.get(id(si.shape), -1), si.n, si.prim_index
-    return t, idx, n, prim
 
 
 def _occluded(scene: mi.Scene, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:

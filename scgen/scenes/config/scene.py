@@ -22,6 +22,7 @@ from scgen.io.yaml_file import NUMBER_FORM, load_yaml
 from scgen.scenes.attitude import check_pose
 from scgen.scenes.config.camera import DEFAULT_CAMERA, camera_preset, check_camera, scale_pixel_sizes
 from scgen.scenes.config.checks import check_prob, check_range, is_number
+from scgen.scenes.config.objects import merge_objects, resolve_objects
 from scgen.scenes.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
 from scgen.scenes.finish import FINISH_MODES
 from scgen.scenes.motion.sequence import check_sequence, merge_sequence
@@ -179,12 +180,15 @@ def load_config(
     preset = camera or _preset_of(data) or _preset_of(overrides or {})
     if preset is not None:
         apply_camera_preset(cfg, preset)
-    for layer in (data, overrides or {}):
+    folders = (Path(path).resolve().parent if path is not None else None, None)
+    for layer, folder in zip((data, overrides or {}), folders, strict=True):
         layer = copy.deepcopy(layer)
         if isinstance(layer.get("camera"), dict):
             layer["camera"].pop("preset", None)
         if "sequence" in layer:  # only where given: an independent-frame config stays what it was
             cfg["sequence"] = merge_sequence({**cfg.get("sequence", {}), **layer.pop("sequence")})
+        if "objects" in layer:  # likewise: a one-object config has no `objects` key
+            cfg["objects"] = merge_objects(layer.pop("objects"), folder)
         _merge(cfg, layer)
     if resolution is not None:
         apply_resolution(cfg, *resolution)
@@ -201,8 +205,15 @@ def apply_camera_preset(cfg: dict[str, Any], name: str) -> None:
     table = camera_preset(name)
     s = table["width"] / cfg["camera"]["width"]
     cfg["camera"] = table
-    cfg["distance"]["min_px"] *= s
-    cfg["distance"]["max_px"] *= s
+    _scale_distances(cfg, s)
+
+
+def _scale_distances(cfg: dict[str, Any], s: float) -> None:
+    """The projected-diameter ranges (px) of the target and of each `[[objects]]` entry, times s."""
+    for distance in (cfg["distance"], *(e["distance"] for e in cfg.get("objects", ()) if "distance" in e)):
+        for key in ("min_px", "max_px"):
+            if key in distance:
+                distance[key] *= s
 
 
 def apply_resolution(cfg: dict[str, Any], width: int, height: int) -> None:
@@ -217,8 +228,7 @@ def apply_resolution(cfg: dict[str, Any], width: int, height: int) -> None:
             cam[key] = (cam[key] + 0.5) * s - 0.5
     cam["width"], cam["height"] = width, height
     scale_pixel_sizes(cam, s)
-    cfg["distance"]["min_px"] *= s
-    cfg["distance"]["max_px"] *= s
+    _scale_distances(cfg, s)
 
 
 def read_config_file(path: Path) -> dict[str, Any]:
@@ -298,6 +308,8 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
     _check_finish(cfg["finish"])
     if "sequence" in cfg:
         check_sequence(cfg["sequence"])
+    if "objects" in cfg:
+        resolve_objects(cfg)
     if not 0 <= cfg["illumination"]["max_phase_deg"] <= 180:
         raise ScgenError("illumination.max_phase_deg must lie in [0, 180]")
     near = cfg["illumination"]["sun_near_view"]
@@ -364,9 +376,12 @@ def _check_distribution(name: str, probs: dict[str, float]) -> None:
         raise ScgenError(f"{name} must be non-negative and sum to 1, got {probs}")
 
 
-def distance_range_m(cfg: dict[str, Any], diameter_m: float) -> tuple[float, float]:
-    """Camera-target distance range: from range_m, or from the projected-diameter range in pixels."""
-    dist = cfg["distance"]
+def distance_range_m(
+    cfg: dict[str, Any], diameter_m: float, distance: dict[str, Any] | None = None
+) -> tuple[float, float]:
+    """Camera-target distance range: from range_m, or from the projected-diameter range in pixels;
+    `distance`: an `[[objects]]` entry's table instead of the target's."""
+    dist = cfg["distance"] if distance is None else distance
     if dist["range_m"] is not None:
         return float(dist["range_m"][0]), float(dist["range_m"][1])
     f = CameraSpec.from_config(cfg["camera"]).focal

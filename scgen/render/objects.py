@@ -1,0 +1,75 @@
+"""The labelled objects beside the target (SceneSpec.objects), as every backend draws and labels them.
+
+Each is drawn like a prop, part by part in its classes' nominal materials (the sample's finish is the
+target's), so it occludes the target and shades it as a prop does and every pass that holds the props
+holds it. Its full mask, the object alone, is an exact ray cast through every pixel centre it may cover
+(scgen.render.mitsuba.raycast, as `scgen annotate` casts instances), the same in both backends.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from scgen.io.buffers import object_instance_id
+from scgen.scenes.model import TargetModel
+from scgen.scenes.projection import projection_box
+from scgen.scenes.spec import Pose, SceneSpec
+
+
+@dataclass(frozen=True)
+class ObjectPart:
+    """One material part of a labelled object: its mesh in the model frame, placed by `pose`."""
+
+    instance: int  # its object's instance id (scgen.io.buffers.object_instance_id)
+    material: str
+    mesh: trimesh.Trimesh
+    pose: Pose
+    diameter: float  # its model's (the materials' texture scale)
+
+
+def object_parts(spec: SceneSpec, models: Mapping[int, TargetModel]) -> list[ObjectPart]:
+    """Every part of every labelled object of `spec` beside the target, object by object."""
+    return [ObjectPart(object_instance_id(j), material, mesh, obj.pose, models[obj.obj_id].diameter)
+            for j, obj in enumerate(spec.objects)
+            for material, mesh in models[obj.obj_id].parts]  # fmt: skip
+
+
+def object_hulls(spec: SceneSpec, hulls: Mapping[int, np.ndarray]) -> list[np.ndarray]:
+    """Each labelled object's convex hull vertices (`hulls` by obj_id, model frame) in the camera frame."""
+    return [hulls[obj.obj_id] @ obj.pose.R_mat.T + obj.pose.t_vec for obj in spec.objects]
+
+
+def model_hulls(models: Mapping[int, TargetModel]) -> dict[int, np.ndarray]:
+    """The vertices of each model's convex hull (model frame), by obj_id."""
+    return {k: np.asarray(m.mesh.convex_hull.vertices, np.float64) for k, m in models.items()}
+
+
+def objects_alone_depth(spec: SceneSpec, models: Mapping[int, TargetModel]) -> tuple[np.ndarray, ...]:
+    """Each labelled object beside the target rendered alone: z depth (metres, float32, 0 where it is not
+    hit) through every pixel centre of the image, one exact ray cast over the pixels it may cover."""
+    if not spec.objects:
+        return ()
+    from scgen.render.mitsuba import raycast
+
+    raycast.start()
+    cam = spec.camera
+    out = []
+    for obj in spec.objects:
+        model = models[obj.obj_id]
+        vertices, faces = np.asarray(model.mesh.vertices), np.asarray(model.mesh.faces)
+        R, t = obj.pose.R_mat, obj.pose.t_vec
+        depth = np.zeros((cam.height, cam.width), np.float32)
+        box = projection_box(vertices, R, t, cam)
+        if box is not None:
+            x0, y0 = max(box[0], 0), max(box[1], 0)
+            x1, y1 = min(box[0] + box[2], cam.width), min(box[1] + box[3], cam.height)
+            if x0 < x1 and y0 < y1:
+                shape = raycast.place_mesh("alone", vertices, faces, R, t)
+                _, d = raycast.cast([shape], cam, (x0, y0, x1 - x0, y1 - y0))
+                depth[y0:y1, x0:x1] = d
+        out.append(depth)
+    return tuple(out)
