@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import mitsuba as mi
 import numpy as np
@@ -24,6 +25,8 @@ from scgen.scenes import load_config
 from scgen.scenes.bundled_models import BUNDLED_MODELS, DEFAULT_MODEL
 from scgen.scenes.model import load_target, normalise_parts
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, SceneSpec, SunSpec
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -118,17 +121,21 @@ def test_white_lambertian_plate_facing_the_sun_matches_mitsuba_and_the_camera_mo
 
 
 def assert_labels_match_mitsuba(model, cfg, seed: int) -> None:
-    """Two samples of `seed` rendered by Blender and by Mitsuba: the same instance map and depth."""
+    """Two samples of `seed` rendered by Blender and by Mitsuba: the same instance map and depth, and the
+    same full masks of the labelled objects beside the target (config `[[objects]]`), if any."""
     generator = Generator(model, cfg, seed)
     specs = [generator.scene(i) for i in range(2)]
-    blender = BlenderBackend(model, quality="draft")
+    blender = BlenderBackend(model, quality="draft", models=generator.models)
     try:
         b = [blender.render(s) for s in specs]
     finally:
         blender.close()
-    m = [MitsubaBackend(model, quality="draft").render(s) for s in specs]
+    m = [MitsubaBackend(model, quality="draft", models=generator.models).render(s) for s in specs]
     for spec, bb, mm in zip(specs, b, m, strict=True):
         assert (bb.instance == mm.instance).mean() >= 0.999
+        assert len(bb.objects_depth) == len(mm.objects_depth) == len(spec.objects)
+        for alone_b, alone_m in zip(bb.objects_depth, mm.objects_depth, strict=True):
+            assert ((alone_b > 0) == (alone_m > 0)).all()  # both backends cast them alone through Mitsuba
         assert ((bb.depth > 0) & (mm.depth > 0)).sum() > 50
         # the same float32 hits as in test_blender_geometry's depth test, to the same bound
         assert median_depth_gap(bb.depth, mm.depth, spec.target.t_vec, model.diameter) <= U32_RAY_HIT
@@ -146,6 +153,12 @@ def test_every_bundled_model_gets_the_same_labels_from_cycles_as_from_mitsuba(na
     """The fleet's thin antennas, whips and shells: Cycles' masks and depth are Mitsuba's ray casts'."""
     cfg = load_config(resolution=(128, 96), overrides={"distance": {"range_m": [0.45, 0.8]}})
     assert_labels_match_mitsuba(load_target(name), cfg, seed=5)
+
+
+def test_labelled_objects_beside_the_target_get_the_same_labels_from_cycles_as_from_mitsuba(model):
+    """The example's servicer and debris: Cycles' instance map and depth hold them as Mitsuba's casts do."""
+    cfg = load_config(ROOT / "examples" / "servicer_client.toml", resolution=(160, 120))
+    assert_labels_match_mitsuba(model, cfg, seed=5)
 
 
 def _datablock_counts(bpy) -> list[int]:
