@@ -20,6 +20,7 @@ from scgen.io.buffers import Buffers
 from scgen.scenes import SceneSpec, TargetShape, load_config, sample_scene
 from scgen.scenes.config.objects import object_models
 from scgen.scenes.model import TargetModel, load_target
+from scgen.scenes.motion.companions import Companion
 from scgen.scenes.motion.sequence import is_sequence, sample_sequence
 from scgen.scenes.motion.tumble import MassProperties, mass_properties
 from scgen.scenes.sampler import ObjectDraw
@@ -93,6 +94,14 @@ class Generator:
         return {1: self.model, **others}
 
     @functools.cached_property
+    def companions(self) -> tuple[Companion, ...]:
+        """What a sequence moves of each `[[objects]]` entry (none without the table)."""
+        masses = {k: mass_properties([mesh for _, mesh in m.parts]) for k, m in self.models.items() if k > 1}
+        return tuple(
+            Companion(d.obj_id, d.shape.radius, masses[d.obj_id], d.entry) for d in self.object_draws
+        )
+
+    @functools.cached_property
     def object_draws(self) -> tuple[ObjectDraw, ...]:
         """What the sampler places of each `[[objects]]` entry (none without the table)."""
         entries = self.cfg.get("objects", ())
@@ -115,7 +124,7 @@ class Generator:
         if self._sequence is None or self._sequence[0] != sequence:
             if self._mass is None:
                 self._mass = mass_properties([mesh for _, mesh in self.model.parts])
-            specs = sample_sequence(self.seed, sequence, self.cfg, self.shape, self._mass)
+            specs = sample_sequence(self.seed, sequence, self.cfg, self.shape, self._mass, self.companions)
             self._sequence = (sequence, specs)
         return self._sequence[1]
 

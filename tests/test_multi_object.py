@@ -18,6 +18,9 @@ from scgen.generator import Generator
 from scgen.io import bop
 from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, object_instance_id
 from scgen.scenes import load_config
+from scgen.scenes.geometry import quat_to_matrix
+from scgen.scenes.motion.orbit import Orbit, hcw_stm
+from scgen.scenes.motion.tumble import mass_properties
 from scgen.scenes.props import bounding_radius
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -133,3 +136,74 @@ def test_every_instance_masks_follow_the_depth_order():
 def test_a_bad_objects_entry_is_refused_naming_it(entry, message):
     with pytest.raises(ScgenError, match=message.replace("[", r"\[").replace("]", r"\]")):
         load_config(overrides={"objects": [entry]})
+
+
+SEQUENCE = """
+[sequence]
+frames = 8
+dt_s = 20.0
+
+[[objects]]
+model = "smallsat"
+separation_m = [8.0, 12.0]
+
+[[objects]]
+model = "upper_stage"
+"""
+
+
+@functools.cache
+def sequence_generator(folder: Path) -> Generator:
+    config = folder / "sequence_objects.toml"
+    config.write_text(SEQUENCE)
+    return Generator.load(config=config, seed=2, resolution=RES, backend="mitsuba", quality="draft")
+
+
+def test_each_object_of_a_sequence_flies_its_own_free_orbit_about_the_target(tmp_path_factory):
+    """Each instance's centre of mass, seen from the target's in LVLH (through the camera's attitude the
+    frames record), is a free HCW trajectory that does not drift: from frames 0 and 1 the state transition
+    matrix predicts every later frame, and y0' = -2 n x0."""
+    gen = sequence_generator(tmp_path_factory.mktemp("seq"))
+    seq = gen.cfg["sequence"]
+    scale = gen.model.diameter / seq["spacecraft_diameter_m"]
+    centre = {k: mass_properties([mesh for _, mesh in m.parts]).centre_of_mass for k, m in gen.models.items()}
+    for s in range(2):
+        frames = gen.sequence(s)
+        n = Orbit(frames[0].sequence.altitude_km * 1e3).n
+        times = np.array([f.sequence.time_s for f in frames])
+        for j, obj in enumerate(frames[0].objects):
+            p = []
+            for f in frames:
+                R_lc = quat_to_matrix(np.asarray(f.sequence.camera_attitude))
+                target = f.target.t_vec + f.target.R_mat @ centre[1]
+                pose = f.objects[j].pose
+                p.append(R_lc @ (pose.t_vec + pose.R_mat @ centre[obj.obj_id] - target) / scale)
+            p = np.array(p)
+            stm = hcw_stm(n, times[1] - times[0])
+            v0 = np.linalg.solve(stm[:3, 3:], p[1] - stm[:3, :3] @ p[0])
+            predicted = np.einsum(
+                "kij,j->ki", hcw_stm(n, times - times[0])[:, :3], np.concatenate([p[0], v0])
+            )
+            # metres of tens of metres, through float64 poses and two solves: far below a millimetre
+            assert np.abs(predicted - p).max() <= 1e-6 * np.abs(p).max()
+            assert v0[1] == pytest.approx(-2 * n * p[0][0], abs=1e-9 * np.abs(v0).max() + 1e-12)
+            assert np.linalg.norm(p, axis=1).min() > 4.0  # |y_c| / 2 of separation_m >= 8 m
+
+
+def test_every_instance_of_a_sequence_is_labelled_exactly(tmp_path_factory):
+    gen = sequence_generator(tmp_path_factory.mktemp("seq_labels"))
+    surfaces = {k: trimesh.proximity.ProximityQuery(m.mesh) for k, m in gen.models.items()}
+    checked = set()
+    for sample in (gen.sample(i) for i in (0, 5, 8, 15)):
+        for _, pose, obj_id, ann, alone in instances(sample):
+            assert not (ann.mask_visib & ~ann.mask).any() and (ann.mask == (alone > 0)).all()
+            vs, us = np.nonzero(ann.mask_visib)
+            if len(us) < 10:
+                continue
+            C = ann.xyz[vs, us].astype(np.float64)
+            err = reprojection_error(C, us, vs, sample.spec.camera, pose.R_mat, pose.t_vec)
+            assert (err <= 0.5).mean() >= 0.99
+            _, dist, _ = surfaces[obj_id].on_surface(C[:: max(1, len(C) // 200)])
+            assert (dist <= SURFACE_TOL * gen.models[obj_id].diameter).mean() >= 0.99
+            checked.add(obj_id)
+    assert checked >= {2, 3}

@@ -14,7 +14,7 @@ import csv
 import functools
 import io
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -59,23 +59,27 @@ class WriteOptions:
 
 
 def dataset_depth_scale(
-    cfg: dict[str, Any], model: TargetModel, max_distance_m: float | None = None,
-    objects: Sequence[tuple[TargetModel, dict[str, Any]]] = (),
+    cfg: dict[str, Any], models: Mapping[int, TargetModel],
+    entries: Sequence[tuple[int, dict[str, Any]]] = (), frames: Sequence[SceneSpec] | None = None,
 ) -> float:  # fmt: skip
-    """The dataset's depth scale (mm per unit): every target point fits, at the largest sampled distance
-    (`max_distance_m` where given: a sequence dataset's farthest frame; else the config's range) plus the
-    model's radius about its origin (|z| <= |t| + |v|); what lies farther is stored as 0. With
-    `[[objects]]` (`objects`: each entry's model and entry), every labelled object's points fit too."""
-    radius = _radius(model)
-    farthest = distance_range_m(cfg, model.diameter)[1] if max_distance_m is None else max_distance_m
-    reach = farthest + radius
-    for other, entry in objects:
-        reach = max(reach, distance_range_m(cfg, other.diameter, entry["distance"])[1] + _radius(other))
+    """The dataset's depth scale (mm per unit): every labelled point fits, at the farthest distance each
+    object is placed at plus its model's radius about its origin (|z| <= |t| + |v|); what lies farther is
+    stored as 0. A sequence dataset (`frames`: every frame) takes its frames' poses; else the far end of
+    the target's distance range (`models` by obj_id, the target's OBJ_ID) and of each `[[objects]]` entry's
+    (`entries`: its obj_id and entry)."""
+    radius = {k: float(np.linalg.norm(np.asarray(m.mesh.vertices), axis=1).max()) for k, m in models.items()}
+    if frames is not None:
+        reach = max(float(np.linalg.norm(s.target.t_vec)) for s in frames) + radius[OBJ_ID]
+        for s in frames:
+            for o in s.objects:
+                reach = max(reach, float(np.linalg.norm(o.pose.t_vec)) + radius[o.obj_id])
+        return bop.depth_scale_for(reach)
+    reach = distance_range_m(cfg, models[OBJ_ID].diameter)[1] + radius[OBJ_ID]
+    for obj_id, entry in entries:
+        reach = max(
+            reach, distance_range_m(cfg, models[obj_id].diameter, entry["distance"])[1] + radius[obj_id]
+        )
     return bop.depth_scale_for(reach)
-
-
-def _radius(model: TargetModel) -> float:
-    return float(np.linalg.norm(np.asarray(model.mesh.vertices), axis=1).max())
 
 
 def dataset_target(layout: Layout, obj_id: int = OBJ_ID) -> tuple[np.ndarray, np.ndarray, float]:

@@ -182,14 +182,14 @@ def sequence_manifest(cfg: dict[str, Any], n: int) -> dict[str, Any]:
     return {"sequence": {"count": n, "frames": cfg["sequence"]["frames"], "dt_s": cfg["sequence"]["dt_s"]}}
 
 
-def write_static_files(layout: Layout, generator: Generator, farthest_m: float | None = None) -> None:
-    """The files every sample's writer reads: camera.json (with the dataset's depth scale: to
-    `farthest_m` where given, else the config's distance range), config.json, the BOP models and the
-    evaluation models."""
+def write_static_files(layout: Layout, generator: Generator, frames: list[SceneSpec] | None = None) -> None:
+    """The files every sample's writer reads: camera.json (with the dataset's depth scale: to the
+    farthest of `frames` where given, a sequence dataset's, else of the config's distance ranges),
+    config.json, the BOP models and the evaluation models."""
     make_output_folder(layout.root)
     cam = generator.cfg["camera"]
-    objects = [(generator.models[d.obj_id], d.entry) for d in generator.object_draws]
-    depth_scale = dataset_depth_scale(generator.cfg, generator.model, farthest_m, objects)
+    entries = [(d.obj_id, d.entry) for d in generator.object_draws]
+    depth_scale = dataset_depth_scale(generator.cfg, generator.models, entries, frames)
     camera = {"cx": cam["cx"], "cy": cam["cy"], "fx": cam["fx"], "fy": cam["fy"], "width": cam["width"],
               "height": cam["height"], "depth_scale": depth_scale}  # fmt: skip
     if not is_pinhole(tuple(cam["dist"])):  # the lens, as each image's scene_camera entry has it
@@ -214,9 +214,9 @@ def prepare_output(job: RenderJob, plan: Plan) -> Layout:
             )
         remove_stale_temporaries(layout.root)
         return layout
-    farthest = max(s.distance_m for s in plan.specs) if is_sequence(plan.generator.cfg) else None
+    frames = plan.specs if is_sequence(plan.generator.cfg) else None
     with writing(job.out):  # a failure (a full disk) is one line, and a new OUT is removed again
-        write_static_files(layout, plan.generator, farthest)
+        write_static_files(layout, plan.generator, frames)
         atomic_write_text(
             layout.splits_path,
             dumps({"split_by": job.split_by, "ratios": list(job.ratios), "seed": job.seed,

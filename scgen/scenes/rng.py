@@ -25,6 +25,7 @@ def factor_rng(seed: int, index: int, factor: str) -> np.random.Generator:
 
 SEQUENCE_PARTS = (
     "orbit", "profile", "attitude", "sun", "pointing", "camera", "background", "finish", "sky", "pose",
+    "objects",
 )  # fmt: skip
 _SEQUENCE_TAG = zlib.crc32(b"sequence")
 
@@ -36,3 +37,10 @@ def sequence_rng(seed: int, sequence: int, part: str) -> np.random.Generator:
     if part not in SEQUENCE_PARTS:
         raise ValueError(f"unknown sequence stream {part!r}")
     return np.random.default_rng([int(seed), int(sequence), _SEQUENCE_TAG, zlib.crc32(part.encode())])
+
+
+def choice(rng: np.random.Generator, probs: dict[str, float]) -> str:
+    """One of `probs`' names, drawn with their weights (normalised here)."""
+    names = list(probs)
+    p = np.array([probs[n] for n in names], dtype=float)
+    return names[int(rng.choice(len(names), p=p / p.sum()))]

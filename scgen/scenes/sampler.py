@@ -22,7 +22,7 @@ from scgen.scenes.imaging import sample_imaging
 from scgen.scenes.materials import PROP_MATERIALS
 from scgen.scenes.placement import Blank, place_caster, place_occluder
 from scgen.scenes.props import bounding_radius
-from scgen.scenes.rng import factor_rng
+from scgen.scenes.rng import choice, factor_rng
 from scgen.scenes.silhouette import CameraView, TargetShape, camera_view, sun_view
 from scgen.scenes.sky import BODY_OF_KIND, sky_params
 from scgen.scenes.spec import BackgroundSpec, CameraSpec, PlacedObject, Pose, PropSpec, SceneSpec, SunSpec
@@ -42,12 +42,6 @@ class ObjectDraw:
     obj_id: int
     shape: TargetShape
     entry: dict[str, Any]
-
-
-def _choice(rng: np.random.Generator, probs: dict[str, float]) -> str:
-    names = list(probs)
-    p = np.array([probs[n] for n in names], dtype=float)
-    return names[int(rng.choice(len(names), p=p / p.sum()))]
 
 
 def sample_scene(
@@ -162,7 +156,7 @@ def _sample_objects(
 
 
 def _sample_sun(rng: np.random.Generator, cfg: dict[str, Any], t: np.ndarray) -> SunSpec:
-    level = _choice(rng, cfg["probs"])
+    level = choice(rng, cfg["probs"])
     to_camera = -t / np.linalg.norm(t)
     direction = random_direction_in_cone(rng, to_camera, np.deg2rad(cfg["max_phase_deg"]))
     irradiance = cfg["solar_irradiance"] * cfg["multipliers"][level]
@@ -214,7 +208,7 @@ def _sample_occluders(
     rng: np.random.Generator, cfg: dict[str, Any], view: CameraView | None, t: np.ndarray, radius: float
 ) -> tuple[str, list[PropSpec]]:
     """The requested occlusion group and the occluder aimed at it ('none': maybe a distractor)."""
-    group = _choice(rng, cfg["group_probs"])
+    group = choice(rng, cfg["group_probs"])
     if view is None or (group == "none" and rng.uniform() >= cfg["distractor_prob"]):
         return group, []
     blank = Blank.draw(rng, "occluder", OCCLUDER_SHAPES, PROP_MATERIALS)
@@ -225,7 +219,7 @@ def _sample_background(
     rng: np.random.Generator, cfg: dict[str, Any], camera: CameraSpec, t: np.ndarray, radius: float,
     radius_px: float, sun_dir: np.ndarray,
 ) -> tuple[BackgroundSpec, list[PropSpec]]:  # fmt: skip
-    kind = _choice(rng, cfg["probs"])
+    kind = choice(rng, cfg["probs"])
     bg_seed = int(rng.integers(2**31))
     params: dict[str, Any] = {}
     clutter: list[PropSpec] = []

@@ -1,5 +1,6 @@
 """The config's `[[objects]]`: labelled objects beside the target, each with its model, count, distance
-range and attitude distribution (docs/config.md, "Several labelled objects").
+range and attitude distribution, and in a `[sequence]` its separation from the target (docs/config.md,
+"objects").
 
 The table is kept only where given, so a one-object config (and its dataset) is what it always was.
 An entry's `distance` and `pose` tables take the top-level ones' keys and default to them (pose: uniform);
@@ -18,7 +19,8 @@ from scgen.scenes.attitude import check_pose
 from scgen.scenes.bundled_models import BUNDLED_MODELS, DEFAULT_MODEL
 from scgen.scenes.config.checks import check_range
 
-ENTRY_KEYS = ("model", "count", "distance", "pose")
+ENTRY_KEYS = ("model", "count", "distance", "pose", "separation_m")
+SEPARATION_M = [8.0, 20.0]  # with [sequence]: the ellipse centre's distance from the target along V-bar (m)
 MAX_INSTANCES = 64  # labelled objects a scene may hold beside the target (BOP's GT ids are per image)
 UNIFORM_POSE = {"distribution": "uniform", "nominal": [1.0, 0.0, 0.0, 0.0], "max_angle_deg": 20.0,
                 "roll_deg": [-20.0, 20.0]}  # fmt: skip
@@ -49,9 +51,6 @@ def resolve_objects(cfg: dict[str, Any]) -> None:
     """Fill each entry's defaults (count 1, the top-level distance, a uniform pose) and check it: a model
     that exists, a count in [1, MAX_INSTANCES], the distance and pose as the top-level ones are checked."""
     entries = cfg["objects"]
-    if "sequence" in cfg:
-        raise ScgenError("[[objects]] with [sequence] is not supported yet: render the objects as "
-                         "independent samples, or the sequence with its target alone")  # fmt: skip
     total = 0
     for i, entry in enumerate(entries):
         name = f"objects[{i}]"
@@ -65,6 +64,8 @@ def resolve_objects(cfg: dict[str, Any]) -> None:
         total += count
         entry["distance"] = _table(name, "distance", cfg["distance"], entry.get("distance"))
         entry["pose"] = _table(name, "pose", UNIFORM_POSE, entry.get("pose"))
+        entry.setdefault("separation_m", list(SEPARATION_M))
+        check_range(f"{name}.separation_m", entry["separation_m"], low=1e-6)
         distance = entry["distance"]
         if distance["range_m"] is None:
             check_range(f"{name}.distance.min_px/max_px", [distance["min_px"], distance["max_px"]], low=1.0)

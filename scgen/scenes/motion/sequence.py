@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -28,6 +29,7 @@ from scgen.scenes.config.checks import check_choice, check_range, is_number
 from scgen.scenes.finish import sample_finish
 from scgen.scenes.geometry import matrix_to_quat
 from scgen.scenes.imaging import sample_imaging
+from scgen.scenes.motion.companions import Companion, companion_tracks
 from scgen.scenes.motion.orbit import (
     NADIR_LVLH,
     PROFILES,
@@ -41,10 +43,18 @@ from scgen.scenes.motion.orbit import (
     sun_direction_lvlh,
 )
 from scgen.scenes.motion.tumble import ATTITUDE_MODES, MassProperties, attitude_track, draw_attitude
-from scgen.scenes.rng import sequence_rng
+from scgen.scenes.rng import choice, sequence_rng
 from scgen.scenes.silhouette import TargetShape
 from scgen.scenes.sky import celestial_frame, sky_background
-from scgen.scenes.spec import BackgroundSpec, CameraSpec, Pose, SceneSpec, SequenceFrame, SunSpec
+from scgen.scenes.spec import (
+    BackgroundSpec,
+    CameraSpec,
+    PlacedObject,
+    Pose,
+    SceneSpec,
+    SequenceFrame,
+    SunSpec,
+)
 
 EARTH_ROTATION_RAD_S = 7.2921159e-5  # the Earth's sidereal spin rate (IERS), turning its map under the orbit
 POINTING_MODES = ("target", "fixed")
@@ -134,12 +144,6 @@ def check_sequence(seq: dict[str, Any]) -> None:
         if not isinstance(ranges, dict):
             raise ScgenError(f"sequence.profiles.{name} must be a table of ranges")
         draw_profile(name, np.random.default_rng(0), ranges)  # names an unknown key or a bad range
-
-
-def _choice(rng: np.random.Generator, probs: dict[str, float]) -> str:
-    names = list(probs)
-    p = np.array([probs[n] for n in names], dtype=float)
-    return names[int(rng.choice(len(names), p=p / p.sum()))]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -232,10 +236,10 @@ def draw_sequence(
     attitude motion's uniform attitude at t = 0 (still drawn, so the motion's rates are the same)."""
     orbit = draw_orbit(sequence_rng(seed, sequence, "orbit"), tuple(seq["altitude_km"]))
     rng = sequence_rng(seed, sequence, "profile")
-    name = _choice(rng, seq["profile_probs"])
+    name = choice(rng, seq["profile_probs"])
     profile = draw_profile(name, rng, seq["profiles"].get(name))
     rng = sequence_rng(seed, sequence, "attitude")
-    attitude = draw_attitude(_choice(rng, seq["attitude_probs"]), rng, props, tuple(seq["rate_deg"]))
+    attitude = draw_attitude(choice(rng, seq["attitude_probs"]), rng, props, tuple(seq["rate_deg"]))
     sun = draw_sun(sequence_rng(seed, sequence, "sun"), seq["max_beta_deg"])
     rng = sequence_rng(seed, sequence, "pointing")
     roll = math.radians(rng.uniform(*seq["roll_deg"]))
@@ -340,15 +344,19 @@ def motion_blur(
 
 
 def sample_sequence(
-    seed: int, sequence: int, cfg: dict[str, Any], shape: TargetShape, props: MassProperties
-) -> list[SceneSpec]:
+    seed: int, sequence: int, cfg: dict[str, Any], shape: TargetShape, props: MassProperties,
+    companions: Sequence[Companion] = (),
+) -> list[SceneSpec]:  # fmt: skip
     """The SceneSpecs of every frame of sequence `sequence` of `seed`; frame k has sample index
-    sequence * frames + k. Depends only on (seed, sequence, cfg, target geometry)."""
+    sequence * frames + k. Depends only on (seed, sequence, cfg, the objects' geometry). `companions`:
+    the config's `[[objects]]` entries (scgen.scenes.motion.companions), from their own stream."""
     seq = cfg["sequence"]
     frames = seq["frames"]
     draw = draw_sequence(seed, sequence, seq, props, cfg["pose"])
     times = np.arange(frames) * float(seq["dt_s"])
-    track = sequence_track(draw, times, shape.diameter / seq["spacecraft_diameter_m"], props, seq["pointing"])
+    scale = shape.diameter / seq["spacecraft_diameter_m"]
+    track = sequence_track(draw, times, scale, props, seq["pointing"])
+    objects = companion_poses(seed, sequence, seq, draw, times, track, scale, shape, companions)
     camera = CameraSpec.from_config(cfg["camera"])
     settings = CameraSettings.from_table(cfg["camera"])
     imaging = sample_imaging(sequence_rng(seed, sequence, "camera"), settings)
@@ -399,6 +407,7 @@ def sample_sequence(
                 shadow_caster=False,
                 imaging=frame_imaging,
                 finish=finish,
+                objects=tuple(frame[k] for frame in objects),
                 sequence=SequenceFrame(
                     sequence=int(sequence),
                     frame=k,
@@ -417,3 +426,26 @@ def sample_sequence(
             )  # fmt: skip
         )
     return specs
+
+
+def companion_poses(
+    seed: int, sequence: int, seq: dict[str, Any], draw: SequenceDraw, times: np.ndarray, track: Track,
+    scale: float, shape: TargetShape, companions: Sequence[Companion],
+) -> list[list[PlacedObject]]:  # fmt: skip
+    """Each `[[objects]]` instance's pose at every frame (instance by instance), on its own orbit about the
+    target (companion_tracks): R = R_LC^T R_LB, t = R_LC^T s (p - r) - R c, as the target's, with p its
+    centre of mass relative to the target's and c its own centre of mass (model frame)."""
+    if not companions:
+        return []
+    n = Orbit(draw.altitude_m).n
+    chaser = draw.profile.state(n, times)[0]
+    rng = sequence_rng(seed, sequence, "objects")
+    paths = companion_tracks(rng, companions, seq, n, times, chaser, scale, shape.radius)
+    centre = {c.obj_id: c.mass.centre_of_mass for c in companions}
+    R_cl = np.swapaxes(track.R_lc, -1, -2)
+    out = []
+    for path in paths:
+        R = R_cl @ path.R_lb
+        t = np.einsum("kij,kj->ki", R_cl, scale * (path.com - chaser)) - R @ centre[path.obj_id]
+        out.append([PlacedObject(path.obj_id, Pose.from_arrays(R[k], t[k])) for k in range(len(times))])
+    return out
