@@ -387,11 +387,19 @@ def merge(out: Path, shards: tuple[Path, ...]) -> None:
     help=", ".join(f.name for f in EXPORT_FORMATS.values() if f.writes_images)
     + " only: how the images get into OUT (default copy).",
 )
+@click.option(
+    "--obj-id",
+    type=int,
+    default=None,
+    help=", ".join(f.name for f in EXPORT_FORMATS.values() if f.one_object)
+    + " only: the object whose poses to write (default: the target, where the dataset has one object).",
+)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | None, quiet: bool) -> None:
+def export(dataset: Path, fmt: str, out: Path, overwrite: bool, images: str | None, obj_id: int | None,
+           quiet: bool) -> None:  # fmt: skip
     from scgen.dataset.export import export_dataset
 
-    counts = export_dataset(dataset, fmt, out, overwrite, images, progress=not quiet)
+    counts = export_dataset(dataset, fmt, out, overwrite, images, progress=not quiet, obj_id=obj_id)
     click.echo(f"{out}: {fmt} export of {dataset}, " + ", ".join(f"{k} {v}" for k, v in counts.items()))
 
 

@@ -143,12 +143,25 @@ def test_resume_refuses_other_settings(reference: Path, tmp_path: Path):
     assert result.exit_code != 0 and "refusing to resume" in result.output and "seed" in result.output
 
 
-def test_sequence_frames_equal_whatever_workers_shards_or_resume(tmp_path: Path):
-    """Frame k of sequence s is byte-identical with one worker, two, merged shards, or resumed from a shard
-    (3 sequences of 3 frames: the frames of a sequence spread over the shards)."""
-    config = tmp_path / "sequence.toml"
-    config.write_text("[sequence]\nframes = 3\ndt_s = 5.0\nattitude_probs = {tumble = 1.0}\n")
-    seq = ["--config", str(config), "--n", "3", "--resolution", "64x48"]
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+# (config text or example file, --n, --resolution, samples): 3 sequences of 3 frames (the frames of a
+# sequence spread over the shards), and 4 images of several labelled objects each (their masks, xyz maps
+# and models of every obj_id merged and resumed as the target's)
+KINDS = {
+    "sequence": ("[sequence]\nframes = 3\ndt_s = 5.0\nattitude_probs = {tumble = 1.0}\n", 3, "64x48", 9),
+    "objects": (EXAMPLES / "servicer_client.toml", 4, "160x120", 4),
+}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_workers_shards_and_resume_equal_one_run(tmp_path: Path, kind: str):
+    """A sequence's frames, or a scene's several labelled objects, are byte-identical with one worker, two,
+    merged shards, or resumed from a shard."""
+    source, n, resolution, total = KINDS[kind]
+    config = source if isinstance(source, Path) else tmp_path / "config.toml"
+    if not isinstance(source, Path):
+        config.write_text(source)
+    seq = ["--config", str(config), "--n", str(n), "--resolution", resolution]
     render(tmp_path / "one", "--workers", "1", *seq)
     render(tmp_path / "two", "--workers", "2", *seq)
     assert_same_dataset(tmp_path / "one", tmp_path / "two")
@@ -158,7 +171,7 @@ def test_sequence_frames_equal_whatever_workers_shards_or_resume(tmp_path: Path)
         main, ["merge", str(tmp_path / "merged"), str(tmp_path / "s0"), str(tmp_path / "s1")]
     )
     assert result.exit_code == 0, result.output
-    assert "9/9 samples" in result.output
+    assert f"{total}/{total} samples" in result.output
     assert_same_dataset(tmp_path / "one", tmp_path / "merged")
-    render(tmp_path / "s0", "--workers", "1", *seq)  # resumes shard 0's 5 frames into the whole job
+    render(tmp_path / "s0", "--workers", "1", *seq)  # resumes shard 0's samples into the whole job
     assert_same_dataset(tmp_path / "one", tmp_path / "s0")

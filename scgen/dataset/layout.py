@@ -153,6 +153,13 @@ def open_dataset(root: str | Path) -> tuple[Layout, dict[str, Any]]:
     return layout, manifest
 
 
+def object_names(manifest: dict[str, Any]) -> dict[int, str]:
+    """obj_id -> model name of every labelled object: the target's (the manifest's `model`), then those of
+    the config's [[objects]] (the manifest's `objects`, written only where there are some)."""
+    others = {int(k): entry["name"] for k, entry in manifest.get("objects", {}).items()}
+    return {OBJ_ID: manifest["model"]["name"], **dict(sorted(others.items()))}
+
+
 def read_metadata(root: str | Path) -> list[dict[str, str]]:
     """Rows of metadata.csv (strings; callers convert the columns they use)."""
     layout, _ = open_dataset(root)

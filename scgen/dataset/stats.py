@@ -10,10 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from scgen.dataset.layout import read_metadata
+from scgen.dataset.layout import object_names, open_dataset, read_metadata
 from scgen.dataset.splits import SPLITS
 from scgen.errors import ScgenError
-from scgen.scenes.factors import FACTOR_GROUPS, distance_groups, view_direction
+from scgen.io import bop
+from scgen.scenes.factors import FACTOR_GROUPS, distance_groups, occlusion_group, view_direction
 from scgen.scenes.geometry import quat_to_matrix
 
 
@@ -37,6 +38,7 @@ def compute_stats(root: str | Path, split: str | None = None, min_group: int = 5
     """{"splits": {SPLIT: {"n", "factors": {FACTOR: {GROUP: COUNT}}, "shares", "distance_edges_m",
     "below_min"}}, "min_group"}."""
     out: dict[str, Any] = {"min_group": min_group, "splits": {}}
+    names = object_names(open_dataset(root)[1])
     for name, rows in select_rows(root, split).items():
         labels = group_labels(rows)
         factors = {f: {g: labels[f].count(g) for g in groups} for f, groups in FACTOR_GROUPS.items()}
@@ -55,6 +57,40 @@ def compute_stats(root: str | Path, split: str | None = None, min_group: int = 5
         }
         if rows and "sequence_id" in rows[0]:
             out["splits"][name]["sequences"] = sequence_counts(rows)
+        if len(names) > 1:
+            out["splits"][name]["objects"] = object_counts(root, name, names)
+    return out
+
+
+VISIB_QUANTILES = (0.0, 0.25, 0.5, 0.75, 1.0)  # the per-object visib_fract quantiles stats reports
+
+
+def object_counts(root: str | Path, split: str, names: dict[int, str]) -> dict[str, Any]:
+    """Per obj_id of a dataset with several labelled objects (its name: `names`), from the split's
+    scene_gt.json and scene_gt_info.json (metadata.csv describes the target only): instances, images
+    holding at least one, visib_fract quantiles, and the occlusion factor's groups of 1 - visib_fract
+    (hidden by another object or cut by the image border alike)."""
+    fractions: dict[int, list[float]] = {obj_id: [] for obj_id in names}
+    images: dict[int, int] = dict.fromkeys(names, 0)
+    for scene in bop.scene_dirs(Path(root), split):
+        gt, infos = (bop.read_json(bop.scene_file(scene, n)) for n in ("scene_gt", "scene_gt_info"))
+        for im_id, entries in gt.items():
+            for e, info in zip(entries, infos[im_id], strict=True):
+                fractions.setdefault(e["obj_id"], []).append(float(info["visib_fract"]))
+            for obj_id in {e["obj_id"] for e in entries}:
+                images[obj_id] = images.get(obj_id, 0) + 1
+    out = {}
+    for obj_id, fs in sorted(fractions.items()):
+        groups = [occlusion_group(1.0 - f) for f in fs]
+        out[str(obj_id)] = {
+            "name": names.get(obj_id, "?"),
+            "instances": len(fs),
+            "images": images.get(obj_id, 0),
+            "visib_fract_quantiles": {str(q): float(np.quantile(fs, q)) for q in VISIB_QUANTILES}
+            if fs
+            else {},
+            "occlusion": {g: groups.count(g) for g in FACTOR_GROUPS["occlusion"]},
+        }
     return out
 
 
@@ -94,10 +130,31 @@ def format_table(stats: dict[str, Any]) -> str:
                 mark = "*" if c < stats["min_group"] else " "
                 cells.append(f"{c:>7d} {100 * st['shares'][factor].get(group, 0.0):5.1f}%{mark}")
             lines.append(cells)
-    widths = [max(len(row[i]) for row in lines) for i in range(len(header))]
-    text = "\n".join("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in lines)
+    text = aligned(lines)
     text += f"\n* fewer than {stats['min_group']} samples: not eligible for group-wise evaluation"
-    return text + format_sequences(stats)
+    return text + format_sequences(stats) + format_objects(stats)
+
+
+def aligned(lines: list[list[str]]) -> str:
+    """Rows of cells as text, each column as wide as its widest cell."""
+    widths = [max(len(row[i]) for row in lines) for i in range(len(lines[0]))]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in lines)
+
+
+def format_objects(stats: dict[str, Any]) -> str:
+    """The per-object table of a dataset with several labelled objects (empty for one object)."""
+    occlusion = FACTOR_GROUPS["occlusion"]
+    header = ["split", "obj_id", "name", "instances", "images", "visib_fract min/q25/median/q75/max",
+              *occlusion]  # fmt: skip
+    lines = [header]
+    for name, st in stats["splits"].items():
+        for obj_id, o in st.get("objects", {}).items():
+            q = "/".join(f"{v:.2f}" for v in o["visib_fract_quantiles"].values()) or "-"
+            counts = [str(o["occlusion"][g]) for g in occlusion]
+            lines.append([name, obj_id, o["name"], str(o["instances"]), str(o["images"]), q, *counts])
+    if len(lines) == 1:
+        return ""
+    return "\nobjects (scene_gt instances; occlusion groups of 1 - visib_fract):\n" + aligned(lines)
 
 
 def format_sequences(stats: dict[str, Any]) -> str:
@@ -120,6 +177,11 @@ def to_csv(stats: dict[str, Any]) -> str:
         for f, groups in st["factors"].items():
             for g, c in groups.items():
                 w.writerow([s, f, g, c, f"{st['shares'][f][g]:.6f}", int(c >= stats["min_group"])])
+        for obj_id, o in st.get("objects", {}).items():  # factor "occlusion:obj_id": 1 - visib_fract
+            n = o["instances"]
+            for g, c in o["occlusion"].items():
+                share = c / n if n else 0.0
+                w.writerow([s, f"occlusion:{obj_id}", g, c, f"{share:.6f}", int(c >= stats["min_group"])])
     return buf.getvalue()
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import functools
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,7 @@ from tqdm import tqdm
 
 from scgen.annotate.annotate import full_projection
 from scgen.dataset.bop_dataset import BopDataset, BopImage, is_bop_dataset, open_bop_dataset
-from scgen.dataset.layout import OBJ_ID, Layout, open_dataset, read_metadata
+from scgen.dataset.layout import Layout, open_dataset, read_metadata
 from scgen.dataset.model_files import EVAL_MAX_EDGE_FRAC
 from scgen.dataset.writer import TargetImage, dataset_target, target_images, target_lists
 from scgen.errors import ScgenError
@@ -96,8 +97,8 @@ def check_scene(
     """Check the samples of one scene folder (their record files): ((sample id, split) of each record,
     problems, the test images among them)."""
     layout, manifest = open_dataset(root)
-    target = dataset_target(layout)
-    lo, size = bop.model_box_m(bop.read_models_info(layout.root)[str(OBJ_ID)])
+    models = object_models(layout)
+    depth_scale = dataset_target(layout)[2]
     scene_files, problems = read_scene_files(records[0].parent.parent)
     seen, images = [], []
     for path in records:
@@ -109,34 +110,67 @@ def check_scene(
         bop_problems = check_bop_entries(scene_files, rec)
         problems += [f"sample {sid}: {p}" for p in bop_problems]
         if not bop_problems:
-            found = check_sample(layout, manifest, rec, lo, lo + size, target)
+            found = check_sample(layout, manifest, rec, models, depth_scale)
             problems += [f"sample {sid}: {p}" for p in found]
     return seen, problems, images
 
 
+@dataclass(frozen=True)
+class ObjectModel:
+    """One obj_id's model as the checks read it: models/ PLY (vertices in metres, faces) and the
+    models_info box (metres) its xyz values must lie in."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+def object_models(layout: Layout) -> dict[int, ObjectModel]:
+    """obj_id -> its ObjectModel, for every object of models_info.json (check_models checks the files)."""
+    out = {}
+    for key, info in bop.read_models_info(layout.root).items():
+        lo, size = bop.model_box_m(info)
+        vertices, faces, _ = dataset_target(layout, int(key))
+        out[int(key)] = ObjectModel(vertices, faces, lo, lo + size)
+    return out
+
+
 def check_models(layout: Layout) -> list[str]:
-    """models/ and models_eval/: PLYs with every vertex property bop_toolkit's load_ply reads, one
-    models_info, and an eval model with no edge over EVAL_MAX_EDGE_FRAC diameters (its vertices are the
-    point set of the toolkit's error functions)."""
+    """models/ and models_eval/, for every obj_id of models_info.json: PLYs with every vertex property
+    bop_toolkit's load_ply reads, one models_info, and eval models with no edge over EVAL_MAX_EDGE_FRAC
+    diameters (their vertices are the point sets of the toolkit's error functions)."""
+    try:
+        info = bop.read_models_info(layout.root)
+    except ScgenError as exc:
+        return [str(exc)]
+    out = [p for obj_id in sorted(map(int, info)) for p in check_model_files(layout, obj_id)]
+    if out:
+        return out
+    if read_json(layout.models_eval_dir / bop.MODELS_INFO_FILE) != info:
+        out.append(f"{bop.MODELS_EVAL_DIR}/{bop.MODELS_INFO_FILE} differs from {bop.MODELS_DIR}/'s")
+    for obj_id in sorted(map(int, info)):
+        longest = bop.read_model_mesh(layout.root, obj_id, bop.MODELS_EVAL_DIR).edges_unique_length.max()
+        limit = EVAL_MAX_EDGE_FRAC * info[str(obj_id)]["diameter"] / bop.MM_PER_M
+        if longest > limit * (1 + 1e-6):  # the PLY holds float32 millimetres
+            edge = f"{longest * bop.MM_PER_M:.2f} mm in {bop.model_file(obj_id)}"
+            out.append(
+                f"{bop.MODELS_EVAL_DIR} has an edge of {edge}, over {EVAL_MAX_EDGE_FRAC:.1%} of its diameter"
+            )
+    return out
+
+
+def check_model_files(layout: Layout, obj_id: int) -> list[str]:
+    """Object `obj_id`'s PLY in models/ and models_eval/: present, with every vertex property."""
     out = []
     for folder in (bop.MODELS_DIR, bop.MODELS_EVAL_DIR):
-        ply = layout.root / folder / bop.model_file(OBJ_ID)
+        ply = layout.root / folder / bop.model_file(obj_id)
         if not ply.is_file():
             out.append(f"{folder}/{ply.name} missing")
             continue
         missing = [p for p in bop.PLY_VERTEX_PROPERTIES if p not in bop.ply_vertex_properties(ply)]
         if missing:
             out.append(f"{folder}/{ply.name} has no vertex {', '.join(missing)}")
-    if out:
-        return out
-    info = bop.read_models_info(layout.root)
-    if read_json(layout.models_eval_dir / bop.MODELS_INFO_FILE) != info:
-        out.append(f"{bop.MODELS_EVAL_DIR}/{bop.MODELS_INFO_FILE} differs from {bop.MODELS_DIR}/'s")
-    longest = bop.read_model_mesh(layout.root, OBJ_ID, bop.MODELS_EVAL_DIR).edges_unique_length.max()
-    limit = EVAL_MAX_EDGE_FRAC * info[str(OBJ_ID)]["diameter"] / bop.MM_PER_M
-    if longest > limit * (1 + 1e-6):  # the PLY holds float32 millimetres
-        out.append(f"{bop.MODELS_EVAL_DIR} has an edge of {longest * bop.MM_PER_M:.2f} mm, over "
-                   f"{EVAL_MAX_EDGE_FRAC:.1%} of the diameter")  # fmt: skip
     return out
 
 
@@ -176,60 +210,95 @@ def check_bop_entries(scene_files: dict[str, Any], rec: dict[str, Any]) -> list[
             for name, content in scene_files.items() if content.get(sid) != rec[name]]  # fmt: skip
 
 
-def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], lo: np.ndarray,
-                 hi: np.ndarray, target: tuple[np.ndarray, np.ndarray, float]) -> list[str]:  # fmt: skip
-    """Problems of one sample: files, mask inclusion, boxes and counts, xyz reprojection and bounds,
-    depth against xyz. `target`: the dataset's model (vertices in metres, faces) and depth scale."""
+def check_sample(layout: Layout, manifest: dict[str, Any], rec: dict[str, Any],
+                 models: dict[int, ObjectModel], depth_scale: float) -> list[str]:  # fmt: skip
+    """Problems of one sample: the RGB and depth images, then every scene_gt instance against its own
+    obj_id's model (check_instance; named "instance K (obj_id J)" where there are several), then the
+    visible masks of the instances against each other."""
     sid, split = rec["sample_id"], rec["split"]
-    out: list[str] = []
     rgb_path = layout.rgb(split, sid, manifest["rgb_format"])
-    paths = rgb_path, layout.mask(split, sid), layout.mask(split, sid, visib=True)
-    rgb, mask, visib = read_image(paths[0]), bop.read_mask(paths[1]), bop.read_mask(paths[2])
-    decoded = zip(paths, (rgb, mask, visib), strict=True)
-    if unreadable := [f"cannot read {p}: {why_unreadable(p)}" for p, a in decoded if a is None]:
-        return unreadable
-    if mask.shape != rgb.shape[:2] or visib.shape != rgb.shape[:2]:
-        out.append("mask size differs from the RGB size")
-        return out
-    info = rec["scene_gt_info"][0]
-    if (visib & ~mask).any():
-        out.append(f"mask_visib has {int((visib & ~mask).sum())} pixels outside mask")
+    rgb = read_image(rgb_path)
+    if rgb is None:
+        return [f"cannot read {rgb_path}: {why_unreadable(rgb_path)}"]
+    out: list[str] = []
+    if rec["scene_camera"]["depth_scale"] != depth_scale:
+        out.append(f"depth_scale {rec['scene_camera']['depth_scale']} != camera.json's {depth_scale}")
     depth = None
     if manifest["save_depth"]:
         depth_path = layout.depth(split, sid)
         depth = read_image(depth_path)
         if depth is None:
             return out + [f"cannot read {depth_path}: {why_unreadable(depth_path)}"]
-        if depth.dtype != np.uint16 or depth.shape != mask.shape:
+        if depth.dtype != np.uint16 or depth.shape != rgb.shape[:2]:
             return out + [f"{depth_path} is not uint16 of the image size"]
-    vertices, faces, depth_scale = target
-    if rec["scene_camera"]["depth_scale"] != depth_scale:
-        out.append(f"depth_scale {rec['scene_camera']['depth_scale']} != camera.json's {depth_scale}")
-    R, t = bop.gt_pose(rec["scene_gt"][0])
-    camera = CameraSpec.from_scene_camera(rec["scene_camera"], mask.shape[1], mask.shape[0])
-    whole = full_projection(mask, camera, vertices @ R.T + t, faces)
+    taken = np.zeros(rgb.shape[:2], np.int32)
+    several = len(rec["scene_gt"]) > 1
+    for k, gt in enumerate(rec["scene_gt"]):
+        name = f"instance {k} (obj_id {gt['obj_id']}): " if several else ""
+        if gt["obj_id"] not in models:
+            out.append(f"{name}no entry in {bop.MODELS_DIR}/{bop.MODELS_INFO_FILE}")
+            continue
+        found, visib = check_instance(layout, manifest, rec, k, models[gt["obj_id"]], rgb.shape[:2], depth)
+        out += [name + p for p in found]
+        if visib is not None:
+            taken += visib
+    return out + overlap_problems(taken)
+
+
+def check_instance(
+    layout: Layout, manifest: dict[str, Any], rec: dict[str, Any], k: int, model: ObjectModel,
+    size: tuple[int, int], depth: np.ndarray | None,
+) -> tuple[list[str], np.ndarray | None]:  # fmt: skip
+    """(problems, mask_visib or None where unreadable) of scene_gt instance k of a sample: its masks
+    decode at the image size (H, W), mask inclusion, scene_gt_info against the masks and the model, xyz
+    reprojection and bounds, depth against xyz."""
+    sid, split = rec["sample_id"], rec["split"]
+    paths = layout.mask(split, sid, inst=k), layout.mask(split, sid, visib=True, inst=k)
+    mask, visib = bop.read_mask(paths[0]), bop.read_mask(paths[1])
+    decoded = zip(paths, (mask, visib), strict=True)
+    if unreadable := [f"cannot read {p}: {why_unreadable(p)}" for p, a in decoded if a is None]:
+        return unreadable, None
+    if mask.shape != size or visib.shape != size:
+        return ["mask size differs from the RGB size"], None
+    info = rec["scene_gt_info"][k]
+    out = mask_inclusion(mask, visib)
+    R, t = bop.gt_pose(rec["scene_gt"][k])
+    camera = CameraSpec.from_scene_camera(rec["scene_camera"], size[1], size[0])
+    whole = full_projection(mask, camera, model.vertices @ R.T + t, model.faces)
     valid = int(mask.sum()) if depth is None else int((mask & (depth > 0)).sum())
     out += check_gt_info(info, visib, whole, valid)
     if info["xyz_box"] is None:
         if visib.any():
             out.append("visible pixels but no xyz map")
-        return out
-    xyz_path = layout.xyz(split, sid)
+        return out, visib
+    xyz_path = layout.xyz(split, sid, inst=k)
     if not xyz_path.is_file():
-        return out + [f"xyz map missing: {xyz_path}"]
+        return out + [f"xyz map missing: {xyz_path}"], visib
     try:
         crop = read_xyz_exr(xyz_path)
     except Exception as exc:  # OpenEXR raises plain exceptions for corrupt files
-        return out + [f"xyz map unreadable: {exc}"]
+        return out + [f"xyz map unreadable: {exc}"], visib
     x, y, w, h = info["xyz_box"]
     if crop.shape[:2] != (h, w):
-        return out + [f"xyz map is {crop.shape[1]}x{crop.shape[0]}, box says {w}x{h}"]
+        return out + [f"xyz map is {crop.shape[1]}x{crop.shape[0]}, box says {w}x{h}"], visib
     vis_crop = visib[y : y + h, x : x + w]
     out += check_xyz_support(crop, vis_crop)
-    out += check_xyz(crop, vis_crop, (x, y), rec, lo, hi)
+    out += check_xyz(crop, vis_crop, (x, y), rec, k, model)
     if depth is not None:
-        out += check_depth(depth[y : y + h, x : x + w], crop, vis_crop, rec, manifest["xyz_dtype"])
-    return out
+        out += check_depth(depth[y : y + h, x : x + w], crop, vis_crop, rec, k, manifest["xyz_dtype"])
+    return out, visib
+
+
+def mask_inclusion(mask: np.ndarray, visib: np.ndarray) -> list[str]:
+    """mask_visib must lie inside mask (the visible part of the whole silhouette)."""
+    outside = int((visib & ~mask).sum())
+    return [f"mask_visib has {outside} pixels outside mask"] if outside else []
+
+
+def overlap_problems(taken: np.ndarray) -> list[str]:
+    """`taken`: per pixel, how many instances' mask_visib hold it; one pixel shows one surface."""
+    n = int((taken > 1).sum())
+    return [f"visible masks of different instances overlap at {n} pixels"] if n else []
 
 
 def check_gt_info(
@@ -250,11 +319,11 @@ def check_gt_info(
 
 
 def check_depth(
-    depth: np.ndarray, crop: np.ndarray, vis: np.ndarray, rec: dict[str, Any], xyz_dtype: str
+    depth: np.ndarray, crop: np.ndarray, vis: np.ndarray, rec: dict[str, Any], k: int, xyz_dtype: str
 ) -> list[str]:
     """The depth image (cropped like the xyz map) must hold the z of the xyz map's points, K(R C + t):
-    within half a depth unit, plus the rounding of the xyz map's own dtype."""
-    R, t = bop.gt_pose(rec["scene_gt"][0])
+    within half a depth unit, plus the rounding of the xyz map's own dtype (k: the scene_gt instance)."""
+    R, t = bop.gt_pose(rec["scene_gt"][k])
     unit_m = rec["scene_camera"]["depth_scale"] / bop.MM_PER_M
     vs, us = np.nonzero(vis)
     C = crop[vs, us].astype(np.float64)
@@ -271,10 +340,11 @@ def check_xyz_support(crop: np.ndarray, vis: np.ndarray) -> list[str]:
     return [f"xyz map non-zero at {n} pixels outside mask_visib"] if n else []
 
 
-def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: dict[str, Any],
-              lo: np.ndarray, hi: np.ndarray) -> list[str]:  # fmt: skip
-    """xyz must reproject onto its own pixels and lie inside the model's bounding box."""
-    R, t = bop.gt_pose(rec["scene_gt"][0])
+def check_xyz(crop: np.ndarray, vis: np.ndarray, offset: tuple[int, int], rec: dict[str, Any], k: int,
+              model: ObjectModel) -> list[str]:  # fmt: skip
+    """xyz of scene_gt instance k must reproject onto its own pixels and lie inside its model's box."""
+    R, t = bop.gt_pose(rec["scene_gt"][k])
+    lo, hi = model.lo, model.hi
     camera = CameraSpec.from_scene_camera(rec["scene_camera"], *vis.shape[::-1])
     vs, us = np.nonzero(vis)
     C = crop[vs, us].astype(np.float64)
@@ -345,9 +415,7 @@ def check_bop_image(data: BopDataset, image: BopImage, entries: list[dict[str, A
             out.append(f"instance {k}: mask or mask_visib missing, unreadable or not {W}x{H}")
             continue
         taken += visib
-        problems = []
-        if (visib & ~mask).any():
-            problems.append(f"mask_visib has {int((visib & ~mask).sum())} pixels outside mask")
+        problems = mask_inclusion(mask, visib)
         box_differs = bop.bbox(*np.nonzero(visib)[::-1]) != info["bbox_visib"]
         if int(visib.sum()) != info["px_count_visib"] or box_differs:
             problems.append("px_count_visib or bbox_visib differ from mask_visib")
@@ -356,9 +424,7 @@ def check_bop_image(data: BopDataset, image: BopImage, entries: list[dict[str, A
         diameter = float(data.models_info[str(obj_id)]["diameter"]) / bop.MM_PER_M
         problems += check_bop_xyz(scene, image, k, visib, info, (R, t), surfaces[obj_id], diameter)
         out += [f"instance {k}: {p}" for p in problems]
-    if (taken > 1).any():
-        out.append(f"visible masks of different instances overlap at {int((taken > 1).sum())} pixels")
-    return out
+    return out + overlap_problems(taken)
 
 
 def check_bop_xyz(scene: Path, image: BopImage, k: int, visib: np.ndarray, info: dict[str, Any],

@@ -3,9 +3,10 @@
     OUT/instances_{train,val,test}.json
 
 `file_name` is the image's path relative to the dataset folder (the image root to give a loader). One
-category, the target; one annotation per image whose target is visible: bbox = scene_gt_info's
-bbox_visib in COCO's convention, segmentation = RLE of mask_visib, area = its pixel count, iscrowd 0.
-Each image entry also carries the sample's metadata.csv row as extra fields.
+category per obj_id (the target, then the config's [[objects]]), named after its model; one annotation
+per visible scene_gt instance: bbox = scene_gt_info's bbox_visib in COCO's convention, segmentation = RLE
+of mask_visib, area = its pixel count, iscrowd 0. Each image entry also carries the sample's metadata.csv
+row (the target's factors) as extra fields.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ import numpy as np
 
 import scgen
 from scgen.dataset.export.output import ExportFormat
-from scgen.dataset.export.source import Sample, Source
-from scgen.dataset.layout import OBJ_ID, dumps
+from scgen.dataset.export.source import Instance, Sample, Source
+from scgen.dataset.layout import dumps
 from scgen.dataset.splits import SPLITS
 from scgen.errors import ScgenError
 from scgen.io import bop
@@ -63,27 +64,32 @@ def rle(mask: np.ndarray) -> dict[str, Any]:
     return {"size": [int(n) for n in encoded["size"]], "counts": encoded["counts"].decode("ascii")}
 
 
-def annotation(sample: Sample) -> dict[str, Any]:
-    """The target's annotation; its id is the sample id + 1, as COCOeval takes id 0 for 'no match'."""
-    visib = bop.read_mask(sample.mask_visib)
+def annotation(sample: Sample, k: int, instance: Instance, stride: int) -> dict[str, Any]:
+    """Instance k's annotation; its id, sample id x `stride` (the most instances of an image) + k + 1, is
+    unique in the dataset and never 0, which COCOeval takes for 'no match' (one object: sample id + 1)."""
+    visib = bop.read_mask(instance.mask_visib)
     if visib is None:
-        path = sample.mask_visib
+        path = instance.mask_visib
         raise ScgenError(f"sample {sample.sample_id}: cannot read {path}: {why_unreadable(path)}")
-    x, y, w, h = bop.box_pixels(sample.gt_info["bbox_visib"])  # COCO's w, h count pixels: BOP's + 1
-    return {"id": sample.sample_id + 1, "image_id": sample.sample_id, "category_id": OBJ_ID,
-            "bbox": [x, y, w, h], "area": int(sample.gt_info["px_count_visib"]), "segmentation": rle(visib),
+    x, y, w, h = bop.box_pixels(instance.gt_info["bbox_visib"])  # COCO's w, h count pixels: BOP's + 1
+    return {"id": sample.sample_id * stride + k + 1, "image_id": sample.sample_id,
+            "category_id": instance.obj_id, "bbox": [x, y, w, h],
+            "area": int(instance.gt_info["px_count_visib"]), "segmentation": rle(visib),
             "iscrowd": 0}  # fmt: skip
 
 
 def instances(source: Source, split: str) -> dict[str, Any]:
     samples = source.split(split)
+    stride = max(len(s.instances) for s in source.samples)
     return {
         "info": {"description": f"scgen dataset {source.root.resolve()}, split {split}: file_name is "
                                 "relative to that folder", "version": scgen.__version__},
         "licenses": [],
-        "categories": [{"id": OBJ_ID, "name": source.model_name, "supercategory": "spacecraft"}],
+        "categories": [{"id": obj_id, "name": name, "supercategory": "spacecraft"}
+                       for obj_id, name in source.objects.items()],
         "images": [image_entry(source, s) for s in samples],
-        "annotations": [annotation(s) for s in samples if s.gt_info["px_count_visib"] > 0],
+        "annotations": [annotation(s, k, i, stride) for s in samples for k, i in enumerate(s.instances)
+                        if i.gt_info["px_count_visib"] > 0],
     }  # fmt: skip
 
 
@@ -99,7 +105,7 @@ def write(source: Source, out: Path) -> dict[str, int]:
 
 FORMAT = ExportFormat(
     name="coco",
-    summary="one COCO instances file per split (masks as RLE, factors per image)",
+    summary="one COCO instances file per split (a category per obj_id, masks as RLE, factors per image)",
     layout="OUT/instances_{train,val,test}.json (file_name relative to DATASET)",
     write=write,
 )

@@ -24,13 +24,15 @@ IMAGE_MODES = ("copy", "hardlink", "symlink")  # how exported images refer to th
 class ExportFormat:
     """One entry of `scgen export`'s registry (scgen.dataset.export.FORMATS): the CLI's choices and help
     come from these. `write(source, out[, images])` fills `out` and returns the images per file written;
-    it takes an IMAGE_MODES value when `writes_images`."""
+    it takes an IMAGE_MODES value when `writes_images`. A `one_object` format labels one object per image:
+    it is handed the dataset as that object's (Source.of_object, `scgen export --obj-id`)."""
 
     name: str
     summary: str  # one line: what the format holds
     layout: str  # what OUT holds, one line
     write: Callable[..., dict[str, int]]
     writes_images: bool = False
+    one_object: bool = False
 
     def run(self, source: Source, out: Path, images: str | None) -> dict[str, int]:
         """Write `source` into `out`; `images` only where the format places image files."""

@@ -6,14 +6,14 @@ The dataset is read and checked before the export starts, so bad input is named 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
 
-from scgen.dataset.layout import OBJ_ID, TARGET_INSTANCE, Layout, open_dataset, read_metadata
+from scgen.dataset.layout import OBJ_ID, TARGET_INSTANCE, Layout, object_names, open_dataset, read_metadata
 from scgen.errors import ScgenError
 from scgen.io import bop
 from scgen.io.image_file import read_image, why_unreadable
@@ -23,8 +23,20 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
+class Instance:
+    """One scene_gt instance of an image: its object, pose (model to camera, metres) and labels."""
+
+    obj_id: int
+    R: np.ndarray
+    t: np.ndarray
+    mask_visib: Path
+    gt_info: dict[str, Any]  # its scene_gt_info.json entry
+
+
+@dataclass(frozen=True)
 class Sample:
-    """One rendered image with its target's pose (model to camera, metres), camera and labels."""
+    """One rendered image with its target's pose (model to camera, metres), camera and labels; every
+    labelled instance (the target first) in `instances`."""
 
     sample_id: int
     split: str
@@ -36,6 +48,17 @@ class Sample:
     dist: np.ndarray  # (5,), zeros for a pinhole camera
     gt_info: dict[str, Any]  # the target's scene_gt_info.json entry
     metadata: dict[str, str]  # the sample's metadata.csv row
+    instances: tuple[Instance, ...] = ()  # in scene_gt order
+
+    def of_object(self, obj_id: int) -> Sample:
+        """The sample with object `obj_id`'s pose and labels in place of the target's; a one-line
+        ScgenError unless the image holds exactly one instance of it."""
+        found = [i for i in self.instances if i.obj_id == obj_id]
+        if len(found) != 1:
+            raise ScgenError(f"sample {self.sample_id} holds {len(found)} instances of obj_id {obj_id}: "
+                             "a one-object export takes an object with one instance per image")  # fmt: skip
+        i = found[0]
+        return replace(self, mask_visib=i.mask_visib, R=i.R, t=i.t, gt_info=i.gt_info)
 
 
 @dataclass(frozen=True)
@@ -45,6 +68,17 @@ class Source:
     model_name: str
     samples: tuple[Sample, ...]  # in sample order
     sequence: dict[str, Any] | None = None  # the manifest's `sequence` (count, frames, dt_s), None if none
+    object_names: dict[int, str] | None = None  # obj_id -> model name of every object; None: the target only
+
+    @property
+    def objects(self) -> dict[int, str]:
+        """obj_id -> model name of every labelled object, the target's first."""
+        return self.object_names or {OBJ_ID: self.model_name}
+
+    def of_object(self, obj_id: int) -> Source:
+        """The dataset as one object's: every sample with that object's pose and labels (Sample.of_object)."""
+        samples = tuple(s.of_object(obj_id) for s in self.samples)
+        return replace(self, model_name=self.objects[obj_id], samples=samples, object_names=None)
 
     def split(self, name: str) -> list[Sample]:
         return [s for s in self.samples if s.split == name]
@@ -77,7 +111,8 @@ def read_source(root: str | Path, progress: bool = False) -> Source:
         if scene not in scenes:
             scenes[scene] = _read(scene, "scene_camera"), _read(scene, "scene_gt_info")
         samples.append(_sample(layout, manifest["rgb_format"], image, row, *scenes[scene]))
-    return Source(layout.root, data.size, manifest["model"]["name"], tuple(samples), manifest.get("sequence"))
+    return Source(layout.root, data.size, manifest["model"]["name"], tuple(samples), manifest.get("sequence"),
+                  object_names(manifest))  # fmt: skip
 
 
 def _read(scene: Path, name: str) -> dict[str, Any]:
@@ -95,11 +130,14 @@ def _sample(layout: Layout, rgb_format: str, image: BopImage, row: dict[str, str
     rgb = layout.rgb(split, sid, rgb_format)
     if read_image(rgb) is None:  # an export copies or points at it: refused unless it decodes
         raise ScgenError(f"sample {sid}: cannot read {rgb}: {why_unreadable(rgb)}")
-    try:
-        info = infos[str(sid)][TARGET_INSTANCE]
-    except (KeyError, IndexError) as exc:
+    entries = infos.get(str(sid), [])
+    if len(entries) != len(image.instances):
         path = bop.scene_file(layout.chunk_dir(split, sid), "scene_gt_info")
-        raise ScgenError(f"sample {sid}: no target entry in {path}") from exc
+        raise ScgenError(f"sample {sid}: {path} has {len(entries)} of its {len(image.instances)} entries")
+    pairs = enumerate(zip(image.instances, entries, strict=True))
+    instances = tuple(Instance(obj_id, R_k, t_k, layout.mask(split, sid, visib=True, inst=k), info)
+                      for k, ((obj_id, R_k, t_k), info) in pairs)  # fmt: skip
     K = np.asarray(image.K, dtype=np.float64).reshape(3, 3)
     return Sample(sid, split, rgb, layout.mask(split, sid, visib=True), R, t, K,
-                  np.asarray(bop.camera_dist(cameras[str(sid)])), info, row)  # fmt: skip
+                  np.asarray(bop.camera_dist(cameras[str(sid)])), entries[TARGET_INSTANCE], row,
+                  instances)  # fmt: skip

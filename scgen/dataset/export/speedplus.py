@@ -17,6 +17,9 @@ SPEED+'s client (speedplusbaseline's `project_keypoints`) projects a body point 
 quat2dcm(q)ᵀ X + r, and its quat2dcm(q) is the direction cosine matrix of the camera (VBS) frame to the
 body (Tango) frame: Rᵀ of the active rotation R(q). So q is the scalar-first quaternion of BOP's R
 (X_cam = R X_model + t) itself and r is t in metres; the body frame is the model frame.
+
+The labels are one object's: the target's, or on a dataset with several labelled objects the one chosen
+with `scgen export --obj-id` (an object with one instance per image).
 """
 
 from __future__ import annotations
@@ -146,4 +149,5 @@ FORMAT = ExportFormat(
     "OUT/seqK/{metadata.json,synthetic/images/,synthetic/seqK.json}, OUT/trajectories.json",
     write=write,
     writes_images=True,
+    one_object=True,
 )
