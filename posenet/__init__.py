@@ -2,7 +2,9 @@
 
 The Python API, loaded on first use (so that `import posenet` stays light): `posenet.train` (a run, as
 `posenet train`), `posenet.evaluate` (a checkpoint on a split, as `posenet eval`), `posenet.Predictor`
-and `posenet.Pose` (a pose from any image, as `posenet predict`), `posenet.Tracker` (a video or sequence
+and `posenet.Pose` (a pose from any image, as `posenet predict`), `posenet.ObjectsPredictor` and
+`posenet.ObjectPose` (every object's pose, one network per object, as `posenet predict` with several
+`--ckpt`), `posenet.Tracker` (a video or sequence
 on the navigation filter, as `posenet predict --track`), `posenet.make_camera`.
 
 OpenMP's idle threads spin briefly, then sleep (GOMP_SPINCOUNT=1000, about 10 us, unless the environment
@@ -31,6 +33,8 @@ API = {
     "evaluate": "posenet.evaluation.evaluate",
     "Predictor": "posenet.predict.predictor",
     "Pose": "posenet.predict.predictor",
+    "ObjectsPredictor": "posenet.predict.objects",
+    "ObjectPose": "posenet.predict.objects",
     "Tracker": "posenet.predict.track",
     "make_camera": "posenet.data.camera",
 }

@@ -148,7 +148,12 @@ def train(
 @main.command("eval")
 @click.option("--data", type=PATH, required=True, help="Dataset folder.")
 @click.option(
-    "--ckpt", type=PATH, required=True, multiple=True, help="Checkpoint (repeatable with --by-factor)."
+    "--ckpt",
+    type=PATH,
+    required=True,
+    multiple=True,
+    help="Checkpoint. Repeatable: one per object (each scored on its own object, then overall), or "
+    "checkpoints compared with --by-factor.",
 )
 @click.option("--split", default="test", show_default=True)
 @click.option(
@@ -238,8 +243,8 @@ def eval_cmd(
                            f"--by-factor for the estimates")  # fmt: skip
     if by_factor is not None and passes > 1:
         raise PosenetError("--passes re-crops the estimates of one evaluation: run eval without --by-factor")
-    if by_factor is None and len(ckpt) != 1:
-        raise PosenetError("several --ckpt are only compared with --by-factor")
+    if by_factor is None and len(ckpt) > 1 and (obj_id is not None or len(methods) > 1):
+        raise PosenetError("several --ckpt score one object each: give no --obj-id, and one --pnp method")
     for c in ckpt:  # every checkpoint, of the right kind, before any work
         load_checkpoint(c, kind="pose")
     for path in (json_path, predictions, bop_csv):
@@ -255,6 +260,10 @@ def eval_cmd(
         click.echo(by_factor_table(res))
         if json_path is not None:
             write_output(json_path, json.dumps(res, indent=2) + "\n")
+        return
+    if len(ckpt) > 1:
+        kw = {"workers": workers, "batch_size": batch_size, "passes": passes, "same_crop_iou": same_crop_iou}
+        eval_objects(data, ckpt, split, boxes, json_path, predictions, bop_csv, methods[0], **kw)
         return
     results = evaluate_pnp(data, ckpt[0], methods, split, boxes, workers=workers, batch_size=batch_size,
                            obj_id=obj_id, passes=passes, same_crop_iou=same_crop_iou)  # fmt: skip
@@ -283,6 +292,47 @@ def eval_cmd(
         click.echo(f"BOP results: {bop_csv}")
 
 
+def eval_objects(
+    data: Path,
+    ckpts: tuple[Path, ...],
+    split: str,
+    boxes: Path | None,
+    json_path: Path | None,
+    predictions: Path,
+    bop_csv: Path | None,
+    method: str,
+    **kw: Any,
+) -> None:
+    """`posenet eval` of one checkpoint per object: a column per object and one overall
+    (instance-weighted), every object's records in --predictions and --bop-csv."""
+    from posenet.evaluation.evaluate import (
+        evaluate_objects,
+        format_table,
+        json_record,
+        overall_summary,
+        summary_rows,
+    )
+    from scgen.io import bop
+
+    results = evaluate_objects(data, ckpts, method, split=split, boxes=boxes, **kw)
+    per_object = {k: r.summary for k, r in results.items()}
+    overall = overall_summary(list(per_object.values()))
+    click.echo(f"boxes: {overall['boxes']}")
+    variants = "/".join(sorted({r.variant for r in results.values()}))
+    header = [f"{variants} on {split}", *(f"obj {k}" for k in per_object), "all"]
+    click.echo(format_table(header, summary_rows([*per_object.values(), overall], keys=set(overall))))
+    records = [r for res in results.values() for r in res.records]
+    write_output(predictions, "".join(json.dumps({**json_record(r), "pnp": method}) + "\n" for r in records))
+    if json_path is not None:
+        objects = [{"obj_id": k, "variant": r.variant, **r.summary} for k, r in results.items()]
+        body = {"split": split, "objects": objects, "overall": overall}
+        write_output(json_path, json.dumps(body, indent=2) + "\n")
+    click.echo(f"predictions: {predictions}")
+    if bop_csv is not None:
+        write_output(bop_csv, bop.results_csv(records))
+        click.echo(f"BOP results: {bop_csv}")
+
+
 @main.command("train-detector")
 @click.option("--data", type=PATH, required=True, help="Dataset folder (train split trained, val selects).")
 @click.option("--out", type=PATH, required=True, help="Run folder: config.yaml, last.pt, best.pt, tb/.")
@@ -295,7 +345,12 @@ def eval_cmd(
 @click.option("--max-steps", type=click.IntRange(min=1), default=None, help="Stop after N steps.")
 @minutes_option
 @click.option("--resume", is_flag=True, help="Continue OUT/last.pt (with OUT/config.yaml unless --config).")
-@click.option("--obj-id", type=click.IntRange(min=1), default=None, help="Object to detect [default: 1].")
+@click.option(
+    "--obj-id",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Detect this object alone (one class)  [default: every object of the dataset's models_info]",
+)
 def train_detector_cmd(
     data: Path,
     out: Path,
@@ -305,17 +360,18 @@ def train_detector_cmd(
     resume: bool,
     obj_id: int | None,
 ) -> None:
-    """Train the single-class target detector on the box the pose network is cropped around: FCOS on the
-    whole object's box clipped to the image (bbox_obj, amodal; the cpu, light and paper presets), or `arch:
-    mask-timm` on the object's mask (`mask`; the box is its extent). Backbones start from ImageNet
-    (`pretrained:` imagenet, package, a local file or null)."""
+    """Train the detector on the box the pose network is cropped around: FCOS on the whole object's box
+    clipped to the image (bbox_obj, amodal; the cpu, light and paper presets), one class per object of the
+    dataset (or --obj-id's alone), or `arch: mask-timm` on one object's mask (`mask`; the box is its
+    extent). Backbones start from ImageNet (`pretrained:` imagenet, package, a local file or null)."""
+    from posenet.data.layout import object_ids
     from posenet.detection.detector import load_detector_config
     from posenet.detection.train import BEST, train_detector
 
     if config is None:
         saved = out / "config.yaml"
         config = str(saved) if resume and saved.is_file() else "cpu"
-    cfg = load_detector_config(config, obj_id)
+    cfg = load_detector_config(config, obj_id, object_ids(data))
     last = train_detector(data, out, cfg, resume=resume, max_steps=max_steps, minutes=minutes)
     best = last.with_name(BEST)
     click.echo(f"checkpoint: {last}")
@@ -604,7 +660,17 @@ def viz(
 
 @main.command()
 @click.argument("source", required=False)
-@click.option("--ckpt", type=PATH, required=True, help="Pose checkpoint (last.pt of posenet train).")
+@click.option(
+    "--ckpt",
+    "--pose",
+    "ckpt",
+    type=PATH,
+    required=True,
+    multiple=True,
+    help="Pose checkpoint (last.pt of posenet train). Repeat it, one per object (posenet train --obj-id), to "
+    "pose every object --detector finds (a detector of several objects; not with --box, --boxes, --onnx, "
+    "--track, --filter or --batch).",
+)
 @click.option("--detector", type=PATH, default=None, help="Detector checkpoint (best.pt of train-detector).")
 @click.option(
     "--camera",
@@ -693,7 +759,7 @@ def viz(
 @click.option("--overwrite", is_flag=True, help="Write into an existing, non-empty --out.")
 def predict(
     source: str | None,
-    ckpt: Path,
+    ckpt: tuple[Path, ...],
     detector: Path | None,
     camera: str | None,
     data: Path | None,
@@ -738,13 +804,18 @@ def predict(
                            "--track, --filter")  # fmt: skip
     if (cuda_graphs or bf16) and batch == 1:
         raise PosenetError("--cuda-graphs and --bf16 go with --batch N (N > 1)")
+    if batch > 1 and len(ckpt) > 1:
+        raise PosenetError(
+            "several pose checkpoints (one per object) take the frames one at a time: no --batch"
+        )
     nav_config = replace(NavConfig(), accel_noise=accel_noise, angular_accel_noise=angular_accel_noise)
-    inputs = predict_inputs(source, ckpt, detector, camera, data, split, box, boxes, resolve_device(device),
-                            preset_intrinsics, onnx_path, min_score, passes, track, frame_dt,
-                            nav_config, filtered, same_crop_iou)  # fmt: skip
+    pose_ckpts = ckpt if len(ckpt) > 1 else ckpt[0]
+    inputs = predict_inputs(source, pose_ckpts, detector, camera, data, split, box, boxes,
+                            resolve_device(device), preset_intrinsics, onnx_path, min_score, passes, track,
+                            frame_dt, nav_config, filtered, same_crop_iou)  # fmt: skip
     batched = None
     if batch > 1:
-        batched = BatchPredictor(inputs.predictor, batch, detector, graphs=cuda_graphs, bf16=bf16)
+        batched = BatchPredictor(inputs.predictor, batch, detector, graphs=cuda_graphs, bf16=bf16)  # type: ignore[arg-type]
     make_output_folder(out)
     with tqdm(total=inputs.total, desc="predict", unit="img", dynamic_ncols=True) as bar:
         run = run_predict(inputs.predictor, inputs.frames, inputs.total, out, inputs.camera, inputs.box_for,
@@ -754,19 +825,20 @@ def predict(
     if batched is not None:
         batched.close()
     posed = sum(r.get("R") is not None for r in run.records)
-    click.echo(f"{len(run.records)} inputs, {posed} poses, {run.failed} failed, "
-               f"{len(run.records) / max(run.seconds, 1e-9):.1f} images/s")  # fmt: skip
+    images = len({r["index"] for r in run.records})  # several objects: a record per object
+    click.echo(f"{images} inputs, {posed} poses, {run.failed} failed, "
+               f"{images / max(run.seconds, 1e-9):.1f} images/s")  # fmt: skip
     if inputs.tracker is not None:
         filtered = [r["filter"] for r in run.records if r.get("filter") is not None]
         click.echo(f"tracking: the detector ran on {inputs.tracker.detections} of {len(run.records)} inputs; "
                    f"the filter posed {len(filtered)}, coasted on {sum(f['coasting'] for f in filtered)}, "
                    f"rejected a measurement's part on {sum(f['rejected'] for f in filtered)}")  # fmt: skip
-    stages = inputs.predictor.timings.per_image_ms(len(run.records))
+    stages = inputs.predictor.timings.per_image_ms(images)
     click.echo("latency per image (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
     for path in run.files:
         click.echo(f"wrote {path}")
     if run.failed:
-        raise PosenetError(f"{run.failed} of {len(run.records)} inputs failed (see {run.files[0]})")
+        raise PosenetError(f"{run.failed} of {images} inputs failed (see {run.files[0]})")
 
 
 if __name__ == "__main__":  # `python -m posenet.cli`, e.g. under `torchrun -m`

@@ -48,6 +48,8 @@ POSENET_FACADE = {
     "posenet.evaluate": "posenet.evaluation.evaluate",
     "posenet.Predictor": "posenet.predict.predictor",
     "posenet.Pose": "posenet.predict.predictor",
+    "posenet.ObjectsPredictor": "posenet.predict.objects",
+    "posenet.ObjectPose": "posenet.predict.objects",
     "posenet.Tracker": "posenet.predict.track",
     "posenet.make_camera": "posenet.data.camera",
 }

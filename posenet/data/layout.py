@@ -69,6 +69,11 @@ def split_scenes(root: Path, split: str) -> list[Path]:
     return sorted(p for p in (root / split).glob("[0-9]*") if _has_gt(p))
 
 
+def object_ids(root: Path) -> list[int]:
+    """The obj_ids of the dataset's objects (models/models_info.json's keys), in increasing order."""
+    return sorted(int(k) for k in bop.read_models_info(root))
+
+
 def scan_split(
     root: Path, split: str, obj_id: int, lens: bool = False, check_images: bool = True
 ) -> list[Instance]:

@@ -1,7 +1,8 @@
 """Running a trained detector: its checkpoint, one box per image, and the box metrics (IoU, AP50, misses).
 
-A detection is the highest-scoring box of an image; an image with none above the score threshold is a
-miss (None). Boxes are [x0, y0, x1, y1] pixel edges, the convention of `detector.visible_boxes`.
+A detection is the highest-scoring box of an image (of one object: `Detection.of`); an image with none
+above the score threshold is a miss (None). Every box the detector kept rides along with its obj_id
+(`Detection.found`). Boxes are [x0, y0, x1, y1] pixel edges, the convention of `detector.visible_boxes`.
 """
 
 from __future__ import annotations
@@ -35,30 +36,67 @@ from posenet.detection.detector import (
 )
 from posenet.detection.segmenter import MaskDetector, mask_box
 
+EdgeBox = tuple[float, float, float, float]  # [x0, y0, x1, y1] pixel edges
+
+
+@dataclass(frozen=True)
+class Found:
+    """One box the detector kept in an image: its edges, score and the object (obj_id) of its class."""
+
+    box: EdgeBox
+    score: float
+    obj_id: int
+
 
 @dataclass(frozen=True)
 class Detection:
-    """The detector's answer for one image: its best box and score (box None: a miss) and the seconds
-    of its forward."""
+    """The detector's answer for one image: its best box and score (box None: a miss), the seconds
+    of its forward, and every box it kept, best first."""
 
     key: tuple[int, int]  # (scene_id, im_id)
-    box: tuple[float, float, float, float] | None
+    box: EdgeBox | None
     score: float
     time_s: float
+    found: tuple[Found, ...] = ()
+
+    def of(self, obj_id: int) -> Detection:
+        """The image's detection of object `obj_id` alone: its best box of that class, or a miss."""
+        mine = tuple(f for f in self.found if f.obj_id == obj_id)
+        box, score = (mine[0].box, mine[0].score) if mine else (None, 0.0)
+        return Detection(self.key, box, score, self.time_s, mine)
+
+
+def detector_obj_ids(state: dict[str, Any]) -> list[int]:
+    """A detector checkpoint's classes: the obj_id of each (class k + 1 is the k-th); a checkpoint from
+    before several objects, one class, its config's obj_id."""
+    return list(state.get("obj_ids") or [int(state["config"].get("obj_id", 1))])
 
 
 def load_detector(ckpt: Path, device: torch.device) -> tuple[FCOS, dict[str, Any]]:
     """The network of a detector checkpoint, in eval mode on `device`, and the checkpoint itself."""
     state = load_checkpoint(ckpt, kind="detector")
-    model = build_detector(state["model_config"])
+    model = build_detector(state["model_config"], classes=len(detector_obj_ids(state)))
     model.load_state_dict(state["model"])
     return model.to(device).eval(), state
 
 
+def found_boxes(pred: dict[str, Tensor], obj_ids: list[int]) -> tuple[Found, ...]:
+    """A torchvision-style detector's output for one image ({boxes, scores, labels}) as its boxes, best
+    first, each with the obj_id of its label (label k: obj_ids[k - 1])."""
+    order = pred["scores"].argsort(descending=True).tolist()
+    boxes, scores, labels = (pred[k].detach().cpu() for k in ("boxes", "scores", "labels"))
+    return tuple(
+        Found(tuple(float(v) for v in boxes[i]), float(scores[i]), obj_ids[int(labels[i]) - 1])  # type: ignore[arg-type]
+        for i in order
+    )
+
+
 @torch.inference_mode()
 def detect(model: FCOS, dataset: DetectionDataset, device: torch.device) -> list[Detection]:
-    """The best box of each image of the dataset, one image per forward (the batch-1 latency is its time)."""
+    """The best box of each image of the dataset, one image per forward (the batch-1 latency is its time),
+    with every box kept labelled by the dataset configuration's classes."""
     model.eval()
+    obj_ids = dataset.cfg.classes()
     out = []
     loader = DataLoader(dataset, batch_size=1, collate_fn=collate)
     for i, (images, _) in enumerate(tqdm(loader, desc="detect", unit="img", dynamic_ncols=True, leave=False)):
@@ -68,12 +106,11 @@ def detect(model: FCOS, dataset: DetectionDataset, device: torch.device) -> list
             torch.cuda.synchronize(device)
         toc = time.perf_counter() - tic
         key = dataset.images[i][0].key
-        if len(pred["scores"]) == 0:
+        found = found_boxes(pred, obj_ids)
+        if not found:
             out.append(Detection(key, None, 0.0, toc))
         else:
-            best = int(pred["scores"].argmax())
-            box = tuple(float(v) for v in pred["boxes"][best])
-            out.append(Detection(key, box, float(pred["scores"][best]), toc))
+            out.append(Detection(key, found[0].box, found[0].score, toc, found))
     return out
 
 
@@ -141,10 +178,14 @@ def detect_split(
     ckpt: Path, data: Path, split: str, obj_id: int, device: torch.device
 ) -> tuple[list[list[Instance]], list[Detection], dict[str, Any]]:
     """The detector checkpoint run over the split's images that show `obj_id`: those images (each its
-    instances), their detections, and the checkpoint."""
+    instances), their detections (a detector of several objects: its boxes of `obj_id`), and the
+    checkpoint."""
     model, state = load_detector(ckpt, device)
     images = image_groups(data, split, obj_id)
-    return images, detect(model, detector_dataset(state, images), device), state
+    dets = detect(model, detector_dataset(state, images), device)
+    if len(detector_obj_ids(state)) > 1:
+        dets = [d.of(obj_id) for d in dets]
+    return images, dets, state
 
 
 def detector_dataset(state: dict[str, Any], images: list) -> DetectionDataset:
@@ -198,6 +239,21 @@ def box_scores(dets: list[Detection], images: list[list[Instance]]) -> dict[str,
     return box_metrics(dets, [target_boxes(i) for i in images]) | {
         f"visib_{k}": visib[k] for k in ("mean_iou", "iou50", "ap50")
     }
+
+
+def class_box_scores(
+    dets: list[Detection], images: list[list[Instance]], obj_ids: list[int]
+) -> dict[str, float]:
+    """`box_scores` pooled over the objects `obj_ids`: each image showing an object counts once for it,
+    its detection that object's best box (`Detection.of`) against that object's instances. With one
+    object whose instances alone `images` hold, this is box_scores itself."""
+    pairs = [
+        (d.of(k), mine)
+        for k in obj_ids
+        for d, insts in zip(dets, images, strict=True)
+        if (mine := [i for i in insts if i.obj_id == k])
+    ]
+    return box_scores([d for d, _ in pairs], [m for _, m in pairs])
 
 
 def detection_entries(dets: list[Detection], obj_id: int, source: str) -> list[dict]:

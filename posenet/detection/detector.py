@@ -1,6 +1,7 @@
 """The target detector of the paper's protocol: its configuration, its networks and its data.
 
-One class (the target object) is learned as the pose network is cropped: around the whole object's
+One class per object (`obj_ids`; by default the target alone, `obj_id`) is learned as the pose network is
+cropped: around the whole object's
 box (`bbox_obj`, occluded parts included) clipped to the image, the amodal box of GDRNPP's detectors
 (`target_boxes`); the mask network learns the whole object's in-image mask (`mask`), whose extent is
 that box. `bbox_visib` stays a box a detector is also scored against (`visible_boxes`). The backbone
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,6 +69,8 @@ class DetectorConfig:
     max_size: int = 1333
     score_thresh: float = 0.05  # detections below are dropped; an image left without any is a miss
     obj_id: int = 1
+    # the classes, class k + 1 being obj_ids[k]; empty: `obj_id` alone (one class, as a one-object detector)
+    obj_ids: list[int] = field(default_factory=list)
     color_prob: float = 0.8  # brightness/contrast, as the pose network's (data.augment)
     brightness: tuple[float, float] = (0.5, 1.5)
     contrast: tuple[float, float] = (0.5, 1.5)
@@ -87,6 +91,10 @@ class DetectorConfig:
 
     def to_dict(self) -> dict[str, Any]:
         return plain(dataclasses.asdict(self))
+
+    def classes(self) -> list[int]:
+        """The obj_id of each class (FCOS's label k is classes()[k - 1]; label 0 is the background)."""
+        return list(self.obj_ids) if self.obj_ids else [self.obj_id]
 
 
 def cpu_config() -> DetectorConfig:
@@ -117,8 +125,13 @@ PRESET_CONFIGS = {"cpu": cpu_config, "light": light_config, "paper": DetectorCon
 PRESETS = tuple(PRESET_CONFIGS)
 
 
-def load_detector_config(name_or_path: str, obj_id: int | None = None) -> DetectorConfig:
-    """A preset name (cpu, its alias smoke, light, paper) or a YAML/TOML file (`preset:` plus any field)."""
+def load_detector_config(
+    name_or_path: str, obj_id: int | None = None, dataset_ids: list[int] | None = None
+) -> DetectorConfig:
+    """A preset name (cpu, its alias smoke, light, paper) or a YAML/TOML file (`preset:` plus any field).
+    `obj_id` learns that object alone (one class); without it, a config naming neither `obj_id` nor
+    `obj_ids` learns every object of `dataset_ids` (the dataset's models_info) when there are several (an
+    FCOS; the mask network learns one object)."""
     name = ALIASES.get(name_or_path, name_or_path)
     if name not in PRESETS and not Path(name_or_path).is_file():
         raise PosenetError(
@@ -127,7 +140,9 @@ def load_detector_config(name_or_path: str, obj_id: int | None = None) -> Detect
     raw = {"preset": name} if name in PRESETS else read_config_file(Path(name_or_path))
     cfg = detector_config_from_dict(raw)
     if obj_id is not None:
-        cfg.obj_id = obj_id
+        cfg.obj_id, cfg.obj_ids = obj_id, []
+    elif len(dataset_ids or ()) > 1 and cfg.arch not in MASK_ARCHS and not {"obj_id", "obj_ids"} & raw.keys():
+        cfg.obj_ids = sorted(dataset_ids)
     return cfg
 
 
@@ -159,6 +174,13 @@ def detector_config_from_dict(raw: dict[str, Any]) -> DetectorConfig:
         )
     if cfg.min_stride not in STRIDES:
         raise PosenetError(f"detector min_stride must be one of {list(STRIDES)}, got {cfg.min_stride}")
+    ids = cfg.classes()
+    if not all(isinstance(k, int) and not isinstance(k, bool) and k >= 1 for k in ids) or len(set(ids)) < len(
+        ids
+    ):
+        raise PosenetError(f"detector obj_ids must be distinct obj_ids (integers >= 1), got {ids}")
+    if cfg.arch in MASK_ARCHS and len(cfg.classes()) > 1:
+        raise PosenetError(f"{cfg.arch} learns one object's mask: give it one object (--obj-id)")
     return cfg
 
 
@@ -182,17 +204,20 @@ class TimmFpn(nn.Module):
         return self.fpn(OrderedDict((str(i), maps[i]) for i in self.levels))
 
 
-def build_detector(model_config: dict[str, Any], pretrained: str | None = None) -> FCOS | MaskDetector:
-    """The network of a `DetectorConfig.model_dict()` (FCOS: classes background and target), its backbone
-    initialised from `pretrained` (posenet.models.backbone) or random init. Images are normalised as the
-    backbone's ImageNet weights expect (timm's pretrained_cfg mean / std)."""
+def build_detector(
+    model_config: dict[str, Any], pretrained: str | None = None, classes: int = 1
+) -> FCOS | MaskDetector:
+    """The network of a `DetectorConfig.model_dict()` (FCOS: the background and `classes` objects), its
+    backbone initialised from `pretrained` (posenet.models.backbone) or random init. Images are normalised
+    as the backbone's ImageNet weights expect (timm's pretrained_cfg mean / std)."""
     if model_config["arch"] in MASK_ARCHS:
         return MaskDetector(
             model_config["backbone"], model_config["fpn_channels"], model_config["score_thresh"], pretrained
         )
     kw = {k: model_config[k] for k in ("min_size", "max_size", "score_thresh")} | {"detections_per_img": 10}
+    num_classes = classes + 1
     if model_config["arch"] == "fcos-resnet50-fpn":
-        model = fcos_resnet50_fpn(weights=None, weights_backbone=None, num_classes=2, **kw)
+        model = fcos_resnet50_fpn(weights=None, weights_backbone=None, num_classes=num_classes, **kw)
         weights = initial_weights("resnet50", pretrained)
         if weights is not None:  # timm and torchvision share ResNet keys; FCOS has no classifier
             model.backbone.body.load_state_dict({k: v for k, v in weights.items() if not k.startswith("fc.")})
@@ -203,9 +228,9 @@ def build_detector(model_config: dict[str, Any], pretrained: str | None = None) 
         anchors = AnchorGenerator(sizes=tuple((s,) for s in strides), aspect_ratios=((1.0,),) * len(strides))
         channels = model_config["fpn_channels"]
         backbone = TimmFpn(model_config["backbone"], channels, strides, pretrained)
-        head = FCOSHead(channels, 1, 2, num_convs=model_config["head_convs"])
+        head = FCOSHead(channels, 1, num_classes, num_convs=model_config["head_convs"])
         mean, std = input_mean_std(backbone.body)
-        model = FCOS(backbone, num_classes=2, anchor_generator=anchors, head=head, **kw,
+        model = FCOS(backbone, num_classes=num_classes, anchor_generator=anchors, head=head, **kw,
                      image_mean=list(mean), image_std=list(std))  # fmt: skip
     # the box distances pass a ReLU: starting them at 1 anchor size, not 0, keeps half of them from dying
     # at once (from random init with lr 1e-3 every one did, and every box had size 0)
@@ -213,19 +238,34 @@ def build_detector(model_config: dict[str, Any], pretrained: str | None = None) 
     return model
 
 
-def image_groups(root: Path, split: str, obj_id: int) -> list[list[Instance]]:
-    """The split's images that show object `obj_id` in the annotations, each as its list of instances."""
+def image_groups(root: Path, split: str, obj_id: int | Sequence[int]) -> list[list[Instance]]:
+    """The split's images that show object `obj_id` (or any of several) in the annotations, each as its
+    list of instances in annotation order."""
+    ids = [obj_id] if isinstance(obj_id, int) else list(obj_id)
+    found = [inst for k in ids for inst in scan_split(root, split, k)]
     groups: dict[tuple[int, int], list[Instance]] = {}
-    for inst in scan_split(root, split, obj_id):
+    for inst in sorted(found, key=lambda i: (i.key, i.inst)):
         groups.setdefault(inst.key, []).append(inst)
     return list(groups.values())
+
+
+def _learned(instances: list[Instance]) -> list[tuple[Instance, Any]]:
+    """The instances with a visible pixel whose whole-object box (bbox_obj) clipped to the image
+    (posenet.data.boxes.clip_box) is not empty, each with that box."""
+    clipped = [(i, clip_box(i.bbox_obj, i.image_size)) for i in instances if i.px_count_visib > 0]
+    return [(i, box) for i, box in clipped if box is not None]
 
 
 def target_boxes(instances: list[Instance]) -> np.ndarray:
     """(n, 4) float32 [x0, y0, x1, y1] pixel-edge boxes the detector learns: of the instances with a visible
     pixel, the whole object's box (bbox_obj) clipped to the image (posenet.data.boxes.clip_box)."""
-    clipped = [clip_box(i.bbox_obj, i.image_size) for i in instances if i.px_count_visib > 0]
-    return np.array([box_edges(box) for box in clipped if box is not None], np.float32).reshape(-1, 4)
+    return np.array([box_edges(box) for _, box in _learned(instances)], np.float32).reshape(-1, 4)
+
+
+def labelled_boxes(instances: list[Instance], classes: list[int]) -> np.ndarray:
+    """(n, 5) float32: `target_boxes` with each box's class label (1 + its obj_id's place in `classes`)."""
+    rows = [[*box_edges(box), classes.index(i.obj_id) + 1] for i, box in _learned(instances)]
+    return np.array(rows, np.float32).reshape(-1, 5)
 
 
 def visible_boxes(instances: list[Instance]) -> np.ndarray:
@@ -239,21 +279,22 @@ def random_zoom(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The image (any channels: a mask may ride along) scaled by s ~ U(scale) on a canvas of its own size
     (black outside), shifted at random but keeping the targets' union box inside where it fits; the boxes
-    moved alike."""
+    moved alike (columns after their 4 edges, such as a label, kept)."""
     h, w = img.shape[:2]
     s = rng.uniform(*scale)
     if len(boxes):
         x0, y0 = boxes[:, :2].min(0) * s
-        x1, y1 = boxes[:, 2:].max(0) * s
+        x1, y1 = boxes[:, 2:4].max(0) * s
     else:
         x0, y0, x1, y1 = 0.0, 0.0, w * s, h * s
     tx = rng.uniform(-x0, w - x1) if w - x1 >= -x0 else (w - x0 - x1) / 2
     ty = rng.uniform(-y0, h - y1) if h - y1 >= -y0 else (h - y0 - y1) / 2
     out = cv2.warpAffine(img, np.float32([[s, 0, tx], [0, s, ty]]), (w, h), flags=cv2.INTER_LINEAR)
     out = out.reshape(img.shape)  # cv2 drops a single channel's axis
-    moved = boxes * s + np.float32([tx, ty, tx, ty])
-    moved[:, 0::2] = moved[:, 0::2].clip(0, w)
-    moved[:, 1::2] = moved[:, 1::2].clip(0, h)
+    moved = boxes.copy()  # any columns after the 4 edges (a label) ride along
+    moved[:, :4] = boxes[:, :4] * s + np.float32([tx, ty, tx, ty])
+    moved[:, 0:4:2] = moved[:, 0:4:2].clip(0, w)
+    moved[:, 1:4:2] = moved[:, 1:4:2].clip(0, h)
     return out, moved[(moved[:, 2] - moved[:, 0] >= 1) & (moved[:, 3] - moved[:, 1] >= 1)]
 
 
@@ -272,7 +313,8 @@ def paste_target(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Copy-paste: the pixels of the donor's first visible instance's whole-object mask (`mask`: what
     hides the target moves with it), scaled by s ~ U(scale), pasted at a random place clear of `boxes`;
-    its box appended (and, when `img` carries a mask as a 4th channel, its mask). Unchanged when the donor
+    its box appended (and, when `img` carries a mask as a 4th channel, its mask). Columns of `boxes` after
+    the 4 edges are the appended row's 0 (a caller labels it, `DetectionDataset`). Unchanged when the donor
     shows nothing or no clear place is found in `tries`."""
     shown = [i for i in donor if i.px_count_visib > 0]
     if not shown:
@@ -308,18 +350,22 @@ def paste_target(
                 region[..., 3] = np.maximum(
                     img[py : py + size[1], px : px + size[0], 3], alpha[..., 0] >= MASK_CUT
                 )
-            return out, np.concatenate([boxes, new[None]])
+            row = np.zeros((1, boxes.shape[1]), np.float32)
+            row[0, :4] = new
+            return out, np.concatenate([boxes, row])
     return img, boxes
 
 
 def hflip(img: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The image (any channels) mirrored left-right and its [x0, y0, x1, y1] pixel-edge boxes alike."""
     w = img.shape[1]
-    return img[:, ::-1], np.stack([w - boxes[:, 2], boxes[:, 1], w - boxes[:, 0], boxes[:, 3]], 1)
+    out = boxes.copy()  # any columns after the 4 edges (a label) ride along
+    out[:, 0], out[:, 2] = w - boxes[:, 2], w - boxes[:, 0]
+    return img[:, ::-1], out
 
 
 class DetectionDataset(Dataset):
-    """One item per image: (3, H, W) float RGB in [0, 1] and its target {boxes, labels} (target_boxes), plus
+    """One item per image: (3, H, W) float RGB in [0, 1] and its target {boxes, labels} (labelled_boxes), plus
     `masks` ((1, H, W) float 0/1, the union of the instances' whole-object masks) for a mask network.
 
     With `train`, each image is augmented (copy-paste, zoom, mirror, brightness/contrast) from a generator
@@ -338,7 +384,8 @@ class DetectionDataset(Dataset):
         epoch, index = index if isinstance(index, tuple) else (0, index)  # EpochSampler's (epoch, index)
         insts = self.images[index]
         img = _read_rgb(insts[0].rgb)
-        boxes = target_boxes(insts)
+        classes = self.cfg.classes()
+        boxes = labelled_boxes(insts, classes)
         with_mask = self.cfg.arch in MASK_ARCHS
         if with_mask:
             shown = [read_mask(i.mask) > 0 for i in insts if i.px_count_visib > 0]
@@ -349,14 +396,19 @@ class DetectionDataset(Dataset):
             c = self.cfg
             if rng.random() < c.paste_prob:
                 donor = self.images[int(rng.integers(len(self.images)))]
+                before = len(boxes)
                 img, boxes = paste_target(img, boxes, donor, rng, c.zoom)
+                if len(boxes) > before:  # the donor's first visible instance, as paste_target takes it
+                    shown = next(i for i in donor if i.px_count_visib > 0)
+                    boxes[-1, 4] = classes.index(shown.obj_id) + 1
             if rng.random() < c.zoom_prob:
                 img, boxes = random_zoom(img, boxes, rng, c.zoom)
             if rng.random() < c.flip_prob:
                 img, boxes = hflip(img, boxes)
             if rng.random() < c.color_prob:
                 img[..., :3] = brightness_contrast(img[..., :3], rng, c.brightness, c.contrast)
-        target = {"boxes": torch.from_numpy(boxes), "labels": torch.ones(len(boxes), dtype=torch.int64)}
+        labels = torch.from_numpy(boxes[:, 4].astype(np.int64))
+        target = {"boxes": torch.from_numpy(np.ascontiguousarray(boxes[:, :4])), "labels": labels}
         if with_mask:
             target["masks"] = torch.from_numpy((img[None, ..., 3] >= MASK_CUT).astype(np.float32))
         return torch.from_numpy(np.ascontiguousarray(img[..., :3].transpose(2, 0, 1))), target

@@ -3,8 +3,10 @@
 OUT holds config.yaml, train_log.jsonl, tb/, last.pt (rewritten every ckpt_every epochs and at the stop) and
 best.pt: the checkpoint with the highest val mean IoU so far (misses count 0) with the box it learns (bbox_obj
 clipped to the image; bbox_visib's beside it, posenet.detection.detect.box_scores), scored whenever last.pt is
-written. Without a val split (or no image in it), best.pt is not written. With `minutes`, the schedule is
-fitted while it runs to end after that much wall time, as pose training's (posenet.training.budget).
+written; with several objects (`obj_ids`) the val figures pool every object's images (class_box_scores), and
+the checkpoint names its classes (`obj_ids`: class k + 1 is the k-th). Without a val split (or no image
+in it), best.pt is not written. With `minutes`, the schedule is fitted while it runs to end after that
+much wall time, as pose training's (posenet.training.budget).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from torchvision.models.detection import FCOS
 from posenet.checkpoint import save_checkpoint
 from posenet.data import EpochSampler
 from posenet.data.layout import split_scenes
-from posenet.detection.detect import box_scores, detect
+from posenet.detection.detect import class_box_scores, detect, detector_obj_ids
 from posenet.detection.detector import (
     DetectionDataset,
     DetectorConfig,
@@ -78,11 +80,12 @@ def _train(
 ) -> Path:
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     o = cfg.optim
-    train_set = DetectionDataset(image_groups(data, "train", cfg.obj_id), cfg, train=True, seed=o.seed)
+    classes = cfg.classes()
+    train_set = DetectionDataset(image_groups(data, "train", classes), cfg, train=True, seed=o.seed)
     per_epoch = len(train_set) // o.batch_size
     if per_epoch == 0:
         raise PosenetError(f"{len(train_set)} training images are fewer than one batch of {o.batch_size}")
-    val = _val_images(data, cfg.obj_id)
+    val = _val_images(data, classes)
     total = o.epochs * per_epoch
     state = resumed_state(out, "detector") if resume else None
     if state is not None:  # a resumed run keeps the schedule it started with (a time budget's fitted one)
@@ -92,11 +95,13 @@ def _train(
         pin_cpu_threads(o.threads)
     torch.manual_seed(o.seed)
     # channels-last weights make every convolution's output channels-last on a CPU (FCOS batches the images)
-    model = build_detector(cfg.model_dict(), cfg.pretrained).to(device, memory_format=memory_format(device))
+    model = build_detector(cfg.model_dict(), cfg.pretrained, len(classes)).to(
+        device, memory_format=memory_format(device)
+    )
     optimizer, scheduler = make_optimizer(model, o, (lambda: budget.total) if budget else total)
     step, best = 0, -math.inf
     if state is not None:
-        if state["model_config"] != cfg.model_dict():
+        if state["model_config"] != cfg.model_dict() or detector_obj_ids(state) != classes:
             raise PosenetError(f"{out / LAST} is from another detector configuration")
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
@@ -117,9 +122,10 @@ def _train(
     return out / LAST
 
 
-def _val_images(data: Path, obj_id: int) -> list | None:
-    """The val split's images, or None when the dataset has no val split. A val image that is not whole is
-    refused as scan_split refuses it for every command, not dropped from validation."""
+def _val_images(data: Path, obj_id: int | list[int]) -> list | None:
+    """The val split's images showing the object(s), or None when the dataset has no val split. A val
+    image that is not whole is refused as scan_split refuses it for every command, not dropped from
+    validation."""
     return (image_groups(data, "val", obj_id) or None) if split_scenes(data, "val") else None
 
 
@@ -220,7 +226,7 @@ def _save(
     metrics: dict[str, Any] = {}
     if val is not None:
         dets = detect(model, DetectionDataset(val, cfg, train=False), device)
-        metrics = box_scores(dets, val)
+        metrics = class_box_scores(dets, val, cfg.classes())
         for k in ("mean_iou", "ap50", "misses", "visib_mean_iou", "visib_ap50"):
             log.tb.add_scalar(f"val/{k}", metrics[k], step)
         log.bar.write(f"step {step}: val mean IoU {metrics['mean_iou']:.3f} (bbox_visib "
@@ -235,6 +241,7 @@ def _save(
         "schedule_steps": schedule,
         "model_config": cfg.model_dict(),
         "config": cfg.to_dict(),
+        "obj_ids": cfg.classes(),
         "val": metrics,
         "best_val_iou": best,
     }

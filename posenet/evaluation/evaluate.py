@@ -3,7 +3,9 @@
 `evaluate` runs the split in batches and returns the summary and one record per instance; the latency
 is measured apart, at batch 1, as `posenet bench` measures it. `by_factor` gives the paper's Table 5:
 ADD@0.02 m per (factor, group) over fixed sample lists, one column per variant, checkpoints of the same
-variant averaged. `scgen.io.bop.results_csv` writes the records as a BOP19 results file.
+variant averaged. `evaluate_objects` scores one checkpoint per object, each on its object, and
+`overall_summary` joins their summaries. `scgen.io.bop.results_csv` writes the records as a BOP19 results
+file.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import torch
 from torch.utils.data import DataLoader
 from tqdm import tqdm
 
-from posenet.checkpoint import load_model
+from posenet.checkpoint import load_checkpoint, load_model
 from posenet.config import config_from_dict
 from posenet.data import open_split
 from posenet.data.boxes import Box, box_source, read_misses
@@ -427,3 +429,40 @@ def by_factor_table(res: dict[str, Any]) -> str:
 def _gap(value: float | None, on_gt: float | None) -> str:
     """The gap in percentage points of a figure on detected boxes to the same on GT boxes."""
     return "-" if value is None or on_gt is None else f"{100 * (value - on_gt):+.2f}"
+
+
+COUNTS = ("n", "missed", "pnp_failed")  # summed over objects in the overall row
+WEIGHTED = ("re_deg", "re_sym_deg", "te_m", "add_0.02m", "add_0.1d", "adds_0.1d", "mssd_0.1d", "add_rot_0.1d",
+            "te_0.1d", "ar_mssd", "esa", "turned")  # fmt: skip  # means and shares: instance-weighted
+
+
+def evaluate_objects(
+    data: Path, ckpts: Sequence[Path], method: str = "patch", **kw: Any
+) -> dict[int, EvalResult]:
+    """Each pose checkpoint on the instances of its own object (its config's data.obj_id; GDRNPP's one
+    network per object), solved with `method`; `kw` as evaluate_pnp's. Two checkpoints of one object are
+    refused: compare those with `by_factor`."""
+    objects: dict[int, Path] = {}
+    for ckpt in ckpts:  # every object named before any work
+        obj_id = config_from_dict(load_checkpoint(ckpt, kind="pose")["config"]).data.obj_id
+        if obj_id in objects:
+            raise PosenetError(f"{objects[obj_id]} and {ckpt} are both of object {obj_id}: several --ckpt "
+                               f"score one object each; those of one object are only compared with "
+                               f"--by-factor")  # fmt: skip
+        objects[obj_id] = ckpt
+    return {k: evaluate_pnp(data, ckpt, (method,), **kw)[method] for k, ckpt in objects.items()}
+
+
+def overall_summary(summaries: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """The summaries of several objects as one: counts summed, means and recalls weighted by each object's
+    instances (COUNTS, WEIGHTED); medians and latency, which do not combine, left out."""
+
+    def weighted(key: str) -> float:
+        pairs = [(s["n"], s[key]) for s in summaries if s["n"] and not math.isnan(s[key])]
+        total = sum(w for w, _ in pairs)
+        return sum(w * v for w, v in pairs) / total if total else math.nan
+
+    names = {s["add_metric"] for s in summaries}
+    out: dict[str, Any] = {k: sum(s[k] for s in summaries) for k in COUNTS}
+    out |= {k: weighted(k) for k in WEIGHTED} | {"symmetric": any(s["symmetric"] for s in summaries)}
+    return out | {"add_metric": names.pop() if len(names) == 1 else "ADD(-S)", "boxes": summaries[0]["boxes"]}

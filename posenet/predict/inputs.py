@@ -4,7 +4,7 @@ camera, the inputs and where each image's box comes from. A problem is one Posen
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +16,7 @@ from posenet.data.camera import Camera, make_camera, parse_inline, read_camera_f
 from posenet.errors import PosenetError
 from posenet.navigation.config import NavConfig
 from posenet.navigation.noise import NoiseModel, require_noise
+from posenet.predict.objects import ObjectsPredictor
 from posenet.predict.options import PREDICT_PASSES, SAME_CROP_IOU
 from posenet.predict.predictor import Box, Predictor
 from posenet.predict.run import MISS
@@ -29,7 +30,7 @@ TRAINING = "training"  # --camera training: the checkpoint's own camera
 
 @dataclass
 class PredictInputs:
-    predictor: Predictor
+    predictor: Predictor | ObjectsPredictor  # several pose checkpoints: an ObjectsPredictor
     frames: Iterable[Frame]
     total: int
     camera: Camera | None  # None with --data: each frame brings its own
@@ -71,9 +72,32 @@ def parse_box(text: str) -> Box:
     return x, y, w, h
 
 
+def check_several(
+    ckpts: Sequence[Path], detector: Path | None, boxed: bool, onnx: Path | None, navigation: bool
+) -> None:
+    """Refuse what several pose checkpoints (one per object) cannot take: every box is the detector's."""
+    if len(ckpts) < 2:
+        return
+    if detector is None or boxed:
+        raise PosenetError("several pose checkpoints (one per object) take their boxes from the detector: "
+                           "give --detector, and neither --box nor --boxes")  # fmt: skip
+    if onnx is not None or navigation:
+        raise PosenetError("several pose checkpoints (one per object) take no --onnx, --track or --filter")
+
+
+def multi_object_frames(data: Path, split: str, obj_ids: list[int]) -> list[Frame]:
+    """The split's images showing any of the objects, one Frame each (dataset_frames), in (scene, image)
+    order."""
+    frames: dict[tuple[int, int] | None, Frame] = {}
+    for obj_id in obj_ids:
+        for frame in dataset_frames(data, split, obj_id):
+            frames.setdefault(frame.key, frame)
+    return [frames[k] for k in sorted(frames, key=lambda k: k or (-1, -1))]
+
+
 def predict_inputs(
     source: str | None,
-    ckpt: Path,
+    ckpt: Path | Sequence[Path],
     detector: Path | None,
     camera: str | None,
     data: Path | None,
@@ -92,7 +116,8 @@ def predict_inputs(
     same_crop_iou: float = SAME_CROP_IOU,
 ) -> PredictInputs:
     """The checked inputs of one predict run (nothing is written here). A sequence dataset's frames come
-    in time order, sequence by sequence (what the filter and the per-sequence overlay videos need). With
+    in time order, sequence by sequence (what the filter and the per-sequence overlay videos need). Several
+    checkpoints (one per object) give an ObjectsPredictor behind the detector (check_several). With
     `filtered` (every frame's pose through the navigation filter) or `track` (also each crop seeded from
     it), the checkpoint's calibrated noise is read (posenet calibrate) and each frame's time is its
     sequence's, else its index times `frame_dt` (default: a video's own frame interval)."""
@@ -106,15 +131,25 @@ def predict_inputs(
     if track and (detector is None or box is not None or boxes is not None):
         raise PosenetError("--track seeds each frame from the last pose and finds the target with the "
                            "detector: give --detector, and neither --box nor --boxes")  # fmt: skip
+    ckpts = [ckpt] if isinstance(ckpt, Path) else list(ckpt)
+    check_several(ckpts, detector, box is not None or boxes is not None, onnx, track or filtered)
     fixed_box = parse_box(box) if box is not None else None
-    noise = NoiseModel.load(require_noise(ckpt)) if track or filtered else None
-    predictor = Predictor.load(ckpt, detector, device, data, onnx, min_score, passes, same_crop_iou)
+    noise = NoiseModel.load(require_noise(ckpts[0])) if track or filtered else None
+    predictor: Predictor | ObjectsPredictor
+    if len(ckpts) > 1:
+        assert detector is not None
+        predictor = ObjectsPredictor.load(ckpts, detector, device, data, min_score, passes, same_crop_iou)
+        obj_ids = predictor.obj_ids
+    else:
+        predictor = Predictor.load(ckpts[0], detector, device, data, onnx, min_score, passes, same_crop_iou)
+        obj_ids = [predictor.obj.obj_id]
     sequences = read_sequence_frames(data) if data is not None else {}
-    obj_id = predictor.obj.obj_id
+    obj_id = obj_ids[0]
     if data is not None:
         if camera is not None:
             raise PosenetError("--camera is taken from the dataset with --data; leave it out")
-        frames = dataset_frames(data, split, obj_id)
+        frames = dataset_frames(data, split, obj_id) if len(obj_ids) == 1 else multi_object_frames(
+            data, split, obj_ids)  # fmt: skip
         if sequences:
             order = {k: (s.sequence_id, s.frame) for k, s in sequences.items()}
             frames.sort(key=lambda f: order.get(f.key, (-1, 0)) if f.key is not None else (-1, 0))
@@ -147,6 +182,7 @@ def predict_inputs(
             if frame_dt is None:
                 raise PosenetError("the filter needs each frame's time: give --dt SECONDS between frames "
                                    "(a video has its rate, a sequence dataset its times)")  # fmt: skip
+        assert isinstance(predictor, Predictor)
         tracker = Tracker(predictor, noise, nav_config, seed_crops=track)
     return PredictInputs(predictor, stream, total, user, box_for, fps, tracker, sequences, frame_dt)
 

@@ -2,8 +2,10 @@
 optional BOP19 results and SPEED+ submission files; an input that cannot be read, or cannot go through
 its camera, is recorded and the batch goes on.
 
-OUT/predictions.jsonl   one line per input: source, (scene_id, im_id), Pose.to_json(), time_ms; or error
-OUT/results.csv         --format bop: BOP19 results (scene_id,im_id,obj_id,score,R,t,time; t in mm)
+OUT/predictions.jsonl   one line per input: source, (scene_id, im_id), Pose.to_json(), obj_id, time_ms; or
+                        error (several objects: a line per object posed, or one of obj_id null for none)
+OUT/results.csv         --format bop: BOP19 results (scene_id,im_id,obj_id,score,R,t,time; t in mm; a row
+                        per posed object, the image's time on each)
 OUT/submission.csv      --format speedplus: filename,q0,q1,q2,q3,x,y,z per image (Kelvins SPEC style)
 OUT/overlays/*.jpg      per image: silhouette edge, axes and box at the predicted pose (not with --no-vis)
 OUT/overlay.mp4         a video input's overlays as a video
@@ -28,6 +30,7 @@ import numpy as np
 from posenet.data.camera import Camera, CameraMismatch
 from posenet.navigation.scene import sequence_frames
 from posenet.predict.batch import BatchPredictor
+from posenet.predict.objects import ObjectsPredictor
 from posenet.predict.overlay import contact_sheet, draw_pose
 from posenet.predict.predictor import NO_DETECTION, Box, Pose, Predictor, Prepared, Timings
 from posenet.predict.sources import Frame, load_frame
@@ -58,7 +61,7 @@ def overlay_name(frame: Frame, index: int) -> str:
 
 
 def run_predict(
-    predictor: Predictor,
+    predictor: Predictor | ObjectsPredictor,
     frames: Iterable[Frame],
     total: int,
     out: Path,
@@ -82,7 +85,8 @@ def run_predict(
     names its box_source and holds the filter's answer (`filter`) and, once its sequence has ended, the
     smoother's (`smoothed`). With `batched` (not with a tracker), frames are loaded in its thread pool and
     predicted `batched.size` at a time (_batches); with neither, each frame alone, its loading, warp and
-    detection a frame ahead in another thread (_prepared)."""
+    detection a frame ahead in another thread (_prepared). An ObjectsPredictor (several objects; no tracker,
+    no batch, no box but its detector's) gives each frame one record per object it poses."""
     run, tic = PredictRun(), time.perf_counter()
     sheet_every = max(1, total // SHEET_TILES)
     sheet: list[np.ndarray] = []
@@ -91,9 +95,12 @@ def run_predict(
     if vis and not video_fps:
         (out / "overlays").mkdir(exist_ok=True)
     noted: set[str] = set()
+    several = isinstance(predictor, ObjectsPredictor)
+    if several:
+        predictor.warn = warn
     if batched is not None:
         stream: Iterator[Any] = _batches(frames, batched, camera, box_for)
-    elif tracker is None:
+    elif tracker is None and not several:
         stream = _prepared(frames, predictor, camera, box_for)
     else:
         stream = iter(frames)
@@ -108,7 +115,7 @@ def run_predict(
         ready, shares = None, None  # with `batched`: the frame's pose and its share of its batch's ms
         if batched is not None:
             frame, ready, shares = item
-        elif tracker is None:
+        elif tracker is None and not several:
             frame, ready, ahead = item  # prepared a frame ahead: its stages' times come with it
             predictor.timings.merge(ahead)
         else:
@@ -137,7 +144,9 @@ def run_predict(
                 noted.add(frame.note)
                 warn(f"Warning: {frame.name}: {frame.note} (so is every such input after it, unmentioned)")
             box = box_for(frame, index)
-            if box == MISS:
+            if isinstance(predictor, ObjectsPredictor):
+                poses = _object_poses(predictor, frame.image, cam)
+            elif box == MISS:
                 pose = NO_DETECTION
             elif isinstance(ready, Prepared):
                 pose = predictor.finish(ready)
@@ -150,9 +159,11 @@ def run_predict(
                 base |= {"box_source": step.source, **step.to_json()}
             else:
                 pose = predictor(frame.image, cam, box)  # type: ignore[arg-type]
+            if not several:
+                poses = [(predictor.obj.obj_id, pose)]
             if vis:
                 t1 = time.perf_counter()
-                drawn = draw_pose(frame.image, pose, predictor.obj, cam)
+                drawn = _draw_poses(frame.image, poses, _objects(predictor), cam)
                 if video_fps:
                     if writer is None:
                         writer = _video_writer(out / "overlay.mp4", video_fps, drawn.shape[1::-1])
@@ -170,7 +181,7 @@ def run_predict(
                 s: round(sum(v), 3) for s, v in spent.items() if v and (shares is None or s == "drawing")
             }
             time_ms = (shares or {}) | time_ms
-            run.records.append({**base, **pose.to_json(), "obj_id": predictor.obj.obj_id, "time_ms": time_ms})
+            run.records += [{**base, **p.to_json(), "obj_id": k, "time_ms": time_ms} for k, p in poses]
             if tracker is not None:
                 tracked.append(run.records[-1])
         if progress is not None:
@@ -184,6 +195,32 @@ def run_predict(
     run.seconds = time.perf_counter() - tic
     _write_outputs(run, out, formats, sheet)
     return run
+
+
+def _object_poses(
+    predictor: ObjectsPredictor, image: np.ndarray, camera: Camera
+) -> list[tuple[int | None, Pose]]:
+    """Each object's (obj_id, pose) in a frame; a frame without any: one NO_DETECTION of no object."""
+    found = predictor(image, camera)
+    return [(p.obj_id, p.pose) for p in found] if found else [(None, NO_DETECTION)]
+
+
+def _objects(predictor: Predictor | ObjectsPredictor) -> dict[int, Any]:
+    """The object model of each obj_id the predictor poses."""
+    if isinstance(predictor, ObjectsPredictor):
+        return predictor.objects()
+    return {predictor.obj.obj_id: predictor.obj}
+
+
+def _draw_poses(
+    image: np.ndarray, poses: list[tuple[int | None, Pose]], objects: dict, cam: Camera
+) -> np.ndarray:
+    """The frame with each pose drawn over it (draw_pose); a pose of no object, the frame as draw_pose
+    draws a miss."""
+    drawn = image
+    for obj_id, pose in poses:
+        drawn = draw_pose(drawn, pose, objects.get(obj_id, next(iter(objects.values()))), cam)
+    return drawn
 
 
 def _attach_smoothed(records: list[dict[str, Any]], tracker: Tracker) -> None:
