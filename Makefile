@@ -46,6 +46,8 @@ figures: install
 	rm -rf .figures && mkdir .figures
 	$(BIN)/scgen preview --out .figures/preview --n 16 --quiet
 	cp .figures/preview/preview.png docs/preview.png
+	$(BIN)/scgen preview --out .figures/fleet --n 8 --backend mitsuba --config examples/fleet.toml --seed 11 --quiet
+	cp .figures/fleet/preview.png docs/fleet_scene.png
 	$(BIN)/python benchmarks/figures/camera_figure.py
 	$(BIN)/python benchmarks/figures/sky_figure.py
 	$(BIN)/scgen preview --sequence 1 --config examples/approach.toml --out .figures/sequence --backend mitsuba --quiet

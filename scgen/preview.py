@@ -2,7 +2,9 @@
 
 Per sample: the RGB image; below it, zoomed on the target, the mask outlines (full: cyan, visible:
 yellow) over the image, the visible mask (occluded part of the full mask in grey) and the xyz map
-in colour; then the factor labels as the dataset records them (measured shadow and occlusion).
+in colour; then the factor labels as the dataset records them (measured shadow and occlusion). Labelled
+objects beside the target (`[[objects]]`) are outlined on the image, each visible mask in its object's
+colour with its obj_id.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ CAPTION_H = 46
 ZOOM_MARGIN = 1.3  # the zoomed panels show the full-mask box enlarged by this factor
 FULL_COLOUR = (0, 220, 255)
 VISIB_COLOUR = (255, 230, 0)
+OBJECT_COLOURS = ((255, 90, 200), (120, 255, 90), (255, 150, 40), (150, 120, 255))  # by obj_id, cycling
 
 
 def xyz_colours(xyz: np.ndarray, mask: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -39,6 +42,24 @@ def outlines(rgb: np.ndarray, ann: Annotation) -> np.ndarray:
     for mask, colour in ((ann.mask, FULL_COLOUR), (ann.mask_visib, VISIB_COLOUR)):
         contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         cv2.drawContours(out, contours, -1, colour, 1)
+    return out
+
+
+def object_outlines(rgb: np.ndarray, objects: list[tuple[int, Annotation]]) -> np.ndarray:
+    """The image with each labelled object's visible-mask outline in its obj_id's colour (OBJECT_COLOURS)
+    and its obj_id beside it; `objects`: (obj_id, its labels) of every instance beside the target."""
+    out = rgb.copy()
+    for obj_id, ann in objects:
+        colour = OBJECT_COLOURS[(obj_id - 2) % len(OBJECT_COLOURS)]
+        contours, _ = cv2.findContours(
+            ann.mask_visib.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE
+        )
+        cv2.drawContours(out, contours, -1, colour, 1)
+        if ann.px_count_visib:
+            x, y, _, _ = ann.bbox_visib
+            cv2.putText(
+                out, str(obj_id), (x, max(y - 2, 9)), cv2.FONT_HERSHEY_PLAIN, 0.8, colour, 1, cv2.LINE_AA
+            )
     return out
 
 
@@ -127,7 +148,12 @@ def build_preview(generator: Generator, n: int, progress: bool = False) -> np.nd
             record = sample.buffers.camera
             caption = labels(spec, ann, group, record.exposure_ev if record else spec.camera.exposure_ev)
             xyz_rgb = xyz_colours(ann.xyz, ann.mask_visib, lo, hi)
-            tiles.append(sample_tile(display_rgb(sample.buffers.rgb), ann, xyz_rgb, caption))
+            rgb = display_rgb(sample.buffers.rgb)
+            if spec.objects:
+                rgb = object_outlines(
+                    rgb, [(o.obj_id, a) for o, a in zip(spec.objects, sample.objects, strict=True)]
+                )
+            tiles.append(sample_tile(rgb, ann, xyz_rgb, caption))
     return contact_sheet(tiles)
 
 
