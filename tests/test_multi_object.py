@@ -11,7 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from click.testing import CliRunner
 
+from scgen.cli import main as scgen_main
 from scgen.dataset.validate import reprojection_error
 from scgen.errors import ScgenError
 from scgen.generator import Generator
@@ -207,3 +209,15 @@ def test_every_instance_of_a_sequence_is_labelled_exactly(tmp_path_factory):
             assert (dist <= SURFACE_TOL * gen.models[obj_id].diameter).mean() >= 0.99
             checked.add(obj_id)
     assert checked >= {2, 3}
+
+
+def test_render_refuses_a_missing_object_model_in_one_line_and_writes_nothing(tmp_path):
+    config = tmp_path / "objects.toml"
+    config.write_text('[[objects]]\nmodel = "parts/servicer.glb"\n')
+    out = tmp_path / "out"
+    result = CliRunner().invoke(scgen_main, ["render", "--n", "1", "--out", str(out), "--backend", "mitsuba",
+                                             "--config", str(config)])  # fmt: skip
+    assert result.exit_code != 0
+    line = result.output.strip().splitlines()[-1]
+    assert line.startswith("Error:") and "objects[0].model" in line and "servicer.glb" in line
+    assert not out.exists()

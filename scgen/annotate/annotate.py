@@ -69,11 +69,15 @@ def full_projection(mask: np.ndarray, camera: CameraSpec, vertices_cam: np.ndarr
     projected. Only samples the image cuts need the raster.
     """
     H, W = mask.shape
-    front = faces[(vertices_cam[faces, 2] > 0).all(axis=1)]
-    tri = camera.project(vertices_cam[front.ravel()]).reshape(-1, 3, 2)
-    lo, hi = np.ceil(tri.min(axis=1)), np.floor(tri.max(axis=1))  # the pixel centres each may cover
-    reach_out = (lo < 0).any(axis=1) | (hi > [W - 1, H - 1]).any(axis=1)
-    if not reach_out.any():
+    # every vertex in front and none of their images past the border: no triangle's is (a sixth of the
+    # projections: each vertex once, not once per triangle)
+    inside = bool((vertices_cam[:, 2] > 0).all()) and not _reach_out(camera.project(vertices_cam), W, H)
+    if not inside:
+        front = faces[(vertices_cam[faces, 2] > 0).all(axis=1)]
+        tri = camera.project(vertices_cam[front.ravel()]).reshape(-1, 3, 2)
+        reach_out = _reach_out(tri, W, H)
+        inside = not reach_out.any()
+    if inside:
         ys, xs = np.nonzero(mask)
         return len(xs), bop.bbox(xs, ys)
     x0, y0, w, h = bop.gt_info_canvas(W, H)
@@ -81,6 +85,13 @@ def full_projection(mask: np.ndarray, camera: CameraSpec, vertices_cam: np.ndarr
     full[-y0 : -y0 + H, -x0 : -x0 + W] = mask
     ys, xs = np.nonzero(full)
     return len(xs), bop.bbox(xs + x0, ys + y0)
+
+
+def _reach_out(uv: np.ndarray, W: int, H: int) -> np.ndarray:
+    """Whether the pixel centres each point set (..., K, 2: a triangle's corners, or one set N x 2) spans,
+    from ceil(min) to floor(max), reach past a W x H image's."""
+    lo, hi = np.ceil(uv.min(axis=-2)), np.floor(uv.max(axis=-2))
+    return (lo < 0).any(axis=-1) | (hi > [W - 1, H - 1]).any(axis=-1)
 
 
 def covered_pixels(tri: np.ndarray, box: Box) -> np.ndarray:
