@@ -31,6 +31,13 @@ AS_BEFORE_REALISM = {
 }
 
 
+def cli_ok(*args: object, code: int = 0) -> str:
+    """`posenet ARGS` through its command line in this process; its output, the exit status asserted."""
+    res = CliRunner().invoke(posenet_main, [str(a) for a in args])
+    assert res.exit_code == code, res.output
+    return res.output
+
+
 def posenet_dataset(tmp_path_factory: pytest.TempPathFactory, seed: int = 0) -> Path:
     """N_IMAGES samples of `seed` rendered with Mitsuba at 320x240 as before scgen's realism
     (AS_BEFORE_REALISM), read-only for tests; seed 1's are scenes the seed-0 set never holds. Rendered

@@ -15,6 +15,7 @@ import torch
 from budget_checks import assert_the_decay_ends_at_the_budget
 from click.testing import CliRunner
 from float_bounds import forward_rel
+from posenet_helpers import cli_ok
 
 from posenet.checkpoint import load_checkpoint
 from posenet.cli import main
@@ -47,17 +48,11 @@ from scgen.cli import main as scgen_main
 MASK = "mask-timm"
 
 
-def _invoke(*args: object) -> str:
-    res = CliRunner().invoke(main, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
-    return res.output
-
-
 @pytest.fixture(scope="module")
 def detector_run(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The cpu preset as a user gets it (its pinned thread count gives the same losses every run)."""
     root = tmp_path_factory.mktemp("detector")
-    _invoke("train-detector", "--data", dataset_dir, "--out", root / "run", "--config", "cpu")
+    cli_ok("train-detector", "--data", dataset_dir, "--out", root / "run", "--config", "cpu")
     return root / "run"
 
 
@@ -108,7 +103,7 @@ def test_stored_detector_boxes_reused_byte_for_byte(
     dataset_dir: Path, detector_run: Path, pose_ckpt: Path, tmp_path: Path
 ) -> None:
     boxes = tmp_path / "boxes.json"
-    out = _invoke("boxes", "--data", dataset_dir, "--split", "test", "--detector", detector_run / "last.pt",
+    out = cli_ok("boxes", "--data", dataset_dir, "--split", "test", "--detector", detector_run / "last.pt",
                   "--out", boxes)  # fmt: skip
     assert "detector" in out
     entries = json.loads(boxes.read_text())
@@ -116,7 +111,7 @@ def test_stored_detector_boxes_reused_byte_for_byte(
     before = boxes.read_bytes()
     runs = []
     for name in ("a", "b"):
-        printed = _invoke("eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--boxes", boxes,
+        printed = cli_ok("eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--boxes", boxes,
                           "--json", tmp_path / f"{name}.json", "--workers", 0)  # fmt: skip
         assert f"boxes: {boxes} (detector:" in printed
         runs.append(json.loads((tmp_path / f"{name}.json").read_text()))
@@ -133,7 +128,7 @@ def test_stored_detector_boxes_reused_byte_for_byte(
 
 def test_miss_is_a_failure_for_every_metric(dataset_dir: Path, pose_ckpt: Path, tmp_path: Path) -> None:
     boxes = tmp_path / "gt.json"
-    assert "ground-truth" in _invoke("boxes", "--data", dataset_dir, "--out", boxes)
+    assert "ground-truth" in cli_ok("boxes", "--data", dataset_dir, "--out", boxes)
     entries = json.loads(boxes.read_text())
     missed = entries[0]
     entries[0] = {**missed, "bbox": [], "score": 0.0, "source": "detector:test"}
@@ -153,7 +148,7 @@ def test_miss_is_a_failure_for_every_metric(dataset_dir: Path, pose_ckpt: Path, 
     for k in ("re_deg", "te_m", "esa"):  # the means are over the estimated instances
         assert res.summary[k] == pytest.approx(np.mean([r[k] for r in others]))
     written = tmp_path / "miss_eval.json"
-    _invoke("eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--boxes", with_miss, "--json", written,
+    cli_ok("eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--boxes", with_miss, "--json", written,
             "--workers", 0)  # fmt: skip
     lines = written.with_suffix(".predictions.jsonl").read_text().splitlines()
     line = next(ln for ln in lines if (json.loads(ln)["scene_id"], json.loads(ln)["im_id"]) == key)
@@ -169,12 +164,12 @@ def test_by_factor_with_a_box_file_gives_the_gap_to_gt_boxes(
                                           str(groups)])  # fmt: skip
     assert res.exit_code == 0, res.output
     boxes = tmp_path / "gt.json"
-    _invoke("boxes", "--data", dataset_dir, "--out", boxes)
+    cli_ok("boxes", "--data", dataset_dir, "--out", boxes)
     on_gt = by_factor(dataset_dir, [pose_ckpt], groups, workers=0)
     with_file = by_factor(dataset_dir, [pose_ckpt], groups, boxes=boxes, workers=0)
     assert "groups_gt_boxes" not in on_gt and with_file["groups_gt_boxes"] == on_gt["groups"]
     assert with_file["groups"] == on_gt["groups"]  # the file holds the GT boxes themselves
-    printed = _invoke("eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--by-factor", groups, "--boxes",
+    printed = cli_ok("eval", "--data", dataset_dir, "--ckpt", pose_ckpt, "--by-factor", groups, "--boxes",
                       boxes, "--workers", 0)  # fmt: skip
     assert f"boxes: {boxes} (gt)" in printed and "gdrnet vs GT boxes (pp)" in printed
     assert "+0.00" in printed and "illumination/" in printed
@@ -261,7 +256,7 @@ def test_the_mask_detector_trains_and_runs_in_onnxruntime(dataset_dir: Path, tmp
     (tmp_path / "mask.yaml").write_text(
         f"preset: cpu\narch: {MASK}\nscore_thresh: 0.01\noptim: {{threads: 1}}\n"
     )
-    _invoke("train-detector", "--data", dataset_dir, "--out", tmp_path / "run", "--config",
+    cli_ok("train-detector", "--data", dataset_dir, "--out", tmp_path / "run", "--config",
             tmp_path / "mask.yaml", "--max-steps", 1)  # fmt: skip
     model, state = load_detector(tmp_path / "run" / "last.pt", torch.device("cpu"))
     graph = tmp_path / "mask.onnx"
@@ -298,7 +293,7 @@ def test_minutes_fit_the_detector_schedule_to_the_budget(dataset_dir: Path, tmp_
     )
     run = tmp_path / "run"
     tic = time.perf_counter()
-    out = _invoke("train-detector", "--data", dataset_dir, "--out", run, "--config", tmp_path / "tiny.yaml",
+    out = cli_ok("train-detector", "--data", dataset_dir, "--out", run, "--config", tmp_path / "tiny.yaml",
                   "--minutes", 0.4)  # fmt: skip
     wall = time.perf_counter() - tic
     fitted = re.search(r"schedule fitted to (\d+) steps", out)
@@ -312,7 +307,7 @@ def test_minutes_fit_the_detector_schedule_to_the_budget(dataset_dir: Path, tmp_
     # step under way, then the last checkpoint and its val scoring
     assert wall >= 24.0 or rows[-1]["step"] == schedule
     assert wall < 24.0 + rows[-1]["step_s"] + 15.0
-    _invoke("train-detector", "--data", dataset_dir, "--out", run, "--resume", "--max-steps", schedule + 2)
+    cli_ok("train-detector", "--data", dataset_dir, "--out", run, "--resume", "--max-steps", schedule + 2)
     last = json.loads((run / "train_log.jsonl").read_text().splitlines()[-1])
     assert last["step"] == schedule  # the fitted schedule's end, not past it toward the config's 500 epochs
     res = CliRunner().invoke(main, ["train-detector", "--data", str(dataset_dir), "--out", str(run),

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 from click.testing import CliRunner
-from posenet_helpers import RESOLUTION, TINY_POSE
+from posenet_helpers import RESOLUTION, TINY_POSE, cli_ok
 
 from posenet.checkpoint import load_checkpoint
 from posenet.cli import main
@@ -29,12 +29,6 @@ ROOT = Path(__file__).resolve().parents[1]
 TINY_DETECTOR = "preset: cpu\noptim: {batch_size: 4}\n"
 
 
-def _invoke(*args: object) -> str:
-    res = CliRunner().invoke(main, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
-    return res.output
-
-
 @pytest.fixture(scope="module")
 def multi(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """20 images of the servicer-and-client config (obj 1 the target, 2 and 3 beside it), a detector of
@@ -46,11 +40,11 @@ def multi(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     run_render(job, progress=False)
     (root / "tiny.yaml").write_text(TINY_POSE)
     (root / "det.yaml").write_text(TINY_DETECTOR)
-    _invoke("train-detector", "--data", data, "--out", root / "det", "--config", root / "det.yaml",
+    cli_ok("train-detector", "--data", data, "--out", root / "det", "--config", root / "det.yaml",
             "--max-steps", 2)  # fmt: skip
     out = {"data": data, "detector": root / "det" / "last.pt"}
     for k in (1, 2):
-        _invoke("train", "--data", data, "--out", root / f"pose{k}", "--config", root / "tiny.yaml",
+        cli_ok("train", "--data", data, "--out", root / f"pose{k}", "--config", root / "tiny.yaml",
                 "--max-steps", 2, "--obj-id", k)  # fmt: skip
         out[f"pose{k}"] = root / f"pose{k}" / "last.pt"
     return out
@@ -100,7 +94,7 @@ def test_predict_poses_each_object_with_its_own_network(multi: dict[str, Path], 
     each posed record's box is a detector box of that object, and results.csv holds a row per posed
     object, with one time per image."""
     out = tmp_path / "pred"
-    _invoke("predict", "--data", multi["data"], "--split", "test", "--pose", multi["pose1"], "--pose",
+    cli_ok("predict", "--data", multi["data"], "--split", "test", "--pose", multi["pose1"], "--pose",
             multi["pose2"], "--detector", multi["detector"], "--out", out, "--format", "bop", "--no-vis",
             "--min-score", 0, "--device", "cpu")  # fmt: skip
     records = [json.loads(line) for line in (out / "predictions.jsonl").read_text().splitlines()]
@@ -147,7 +141,7 @@ def test_predict_refuses_several_pose_checkpoints_without_the_detector(multi: di
 def test_eval_scores_each_object_and_all(multi: dict[str, Path], tmp_path: Path) -> None:
     """One summary per checkpoint's object and an overall one whose instances are theirs summed."""
     out = tmp_path / "eval.json"
-    text = _invoke("eval", "--data", multi["data"], "--ckpt", multi["pose1"], "--ckpt", multi["pose2"],
+    text = cli_ok("eval", "--data", multi["data"], "--ckpt", multi["pose1"], "--ckpt", multi["pose2"],
                    "--workers", 0, "--json", out, "--bop-csv", tmp_path / "eval.csv")  # fmt: skip
     summary = json.loads(out.read_text())
     assert [o["obj_id"] for o in summary["objects"]] == [1, 2]

@@ -18,7 +18,7 @@ import pytest
 import torch
 from click.testing import CliRunner
 from float_bounds import U32, forward_rel, gram_schmidt_gain, pose_checkpoint_rel, rotation_outputs
-from posenet_helpers import calibrate_untrained
+from posenet_helpers import calibrate_untrained, cli_ok
 
 import posenet
 from posenet.checkpoint import load_checkpoint, save_checkpoint
@@ -42,12 +42,6 @@ from scgen.scenes.spec import CameraSpec
 TINY_DETECTOR = "preset: cpu\npretrained: null\nfpn_channels: 32\nhead_convs: 1\noptim: {threads: 1}\n"
 
 
-def _invoke(*args: object, code: int = 0) -> str:
-    res = CliRunner().invoke(main, [str(a) for a in args])
-    assert res.exit_code == code, res.output
-    return res.output
-
-
 def _lines(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines()]
 
@@ -56,7 +50,7 @@ def _lines(path: Path) -> list[dict]:
 def detector_ckpt(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("detector")
     (root / "tiny.yaml").write_text(TINY_DETECTOR)
-    _invoke("train-detector", "--data", dataset_dir, "--out", root / "run", "--config", root / "tiny.yaml",
+    cli_ok("train-detector", "--data", dataset_dir, "--out", root / "run", "--config", root / "tiny.yaml",
             "--max-steps", 1)  # fmt: skip
     return root / "run" / "last.pt"
 
@@ -73,7 +67,7 @@ def user_folder(dataset_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> 
 
 def test_a_split_gives_eval_poses_and_the_field_files(dataset_dir: Path, pose_ckpt: Path, tmp_path: Path):
     out = tmp_path / "pred"
-    _invoke("predict", "--data", dataset_dir, "--split", "test", "--ckpt", pose_ckpt, "--out", out,
+    cli_ok("predict", "--data", dataset_dir, "--split", "test", "--ckpt", pose_ckpt, "--out", out,
             "--format", "bop", "--format", "speedplus")  # fmt: skip
     records = {(r["scene_id"], r["im_id"]): r for r in _lines(out / "predictions.jsonl")}
     result = evaluate(dataset_dir, pose_ckpt, "test", workers=0, batch_size=1, passes=PREDICT_PASSES)
@@ -132,7 +126,7 @@ def test_files_folder_glob_and_video(user_folder: Path, pose_ckpt: Path, tmp_pat
 
 
 def _predict_to(out: Path, source: object, ckpt: Path, camera: Path, box: str) -> Path:
-    _invoke("predict", source, "--ckpt", ckpt, "--camera", camera, "--box", box, "--out", out)
+    cli_ok("predict", source, "--ckpt", ckpt, "--camera", camera, "--box", box, "--out", out)
     return out
 
 
@@ -140,7 +134,7 @@ def test_the_detector_boxes_every_image(
     user_folder: Path, pose_ckpt: Path, detector_ckpt: Path, tmp_path: Path
 ):
     out = tmp_path / "det"
-    _invoke("predict", user_folder, "--ckpt", pose_ckpt, "--detector", detector_ckpt, "--camera",
+    cli_ok("predict", user_folder, "--ckpt", pose_ckpt, "--detector", detector_ckpt, "--camera",
             user_folder / "camera.json", "--out", out, "--no-vis")  # fmt: skip
     records = _lines(out / "predictions.jsonl")
     assert len(records) == len(list(user_folder.glob("frame*")))
@@ -203,7 +197,7 @@ def test_bad_inputs_are_one_line_and_write_nothing(
 def test_a_detector_checkpoint_as_the_pose_one_is_named(
     detector_ckpt: Path, user_folder: Path, tmp_path: Path
 ):
-    out = _invoke("predict", user_folder, "--ckpt", detector_ckpt, "--camera", "training", "--box", "1,1,9,9",
+    out = cli_ok("predict", user_folder, "--ckpt", detector_ckpt, "--camera", "training", "--box", "1,1,9,9",
                   "--out", tmp_path / "o", code=1)  # fmt: skip
     assert (
         "is a detector checkpoint (posenet train-detector's), not a pose one" in out
@@ -216,9 +210,9 @@ def test_an_existing_output_needs_overwrite(user_folder: Path, pose_ckpt: Path, 
     out = tmp_path / "out"
     image = sorted(user_folder.glob("frame*"))[0]
     args = ["predict", image, "--ckpt", pose_ckpt, "--camera", "training", "--box", "1,1,60,60", "--out", out]
-    _invoke(*args, "--no-vis")
-    assert "exists (give --overwrite" in _invoke(*args, code=1)
-    _invoke(*args, "--overwrite")
+    cli_ok(*args, "--no-vis")
+    assert "exists (give --overwrite" in cli_ok(*args, code=1)
+    cli_ok(*args, "--overwrite")
 
 
 def test_an_old_checkpoint_takes_its_dataset(dataset_dir: Path, pose_ckpt: Path, tmp_path: Path):
@@ -326,13 +320,13 @@ def test_onnx_gives_torch_poses(user_folder: Path, pose_ckpt: Path, detector_ckp
     agrees to float_bounds' rounding of its scale (the poses are compared at a given box: how a pose
     moves with its crop box is the network's sensitivity, which no rounding model bounds)."""
     pose_onnx, det_onnx = tmp_path / "pose.onnx", tmp_path / "det.onnx"
-    _invoke("export", "--ckpt", pose_ckpt, "--onnx", pose_onnx, "--detector", detector_ckpt,
+    cli_ok("export", "--ckpt", pose_ckpt, "--onnx", pose_onnx, "--detector", detector_ckpt,
             "--detector-onnx", det_onnx)  # fmt: skip
     common = [user_folder, "--ckpt", pose_ckpt, "--camera", user_folder / "camera.json", "--no-vis"]
     common += ["--min-score", 0]  # every box: the 1-step detector's scores are not the point here
     common += ["--passes", 1]  # rounding at one crop (re-crops: the batched path's test, _same_pose)
-    _invoke("predict", *common, "--detector", detector_ckpt, "--out", tmp_path / "torch")
-    _invoke("predict", *common, "--detector", det_onnx, "--onnx", pose_onnx, "--out", tmp_path / "onnx")
+    cli_ok("predict", *common, "--detector", detector_ckpt, "--out", tmp_path / "torch")
+    cli_ok("predict", *common, "--detector", det_onnx, "--onnx", pose_onnx, "--out", tmp_path / "onnx")
     torch_lines, onnx_lines = (_lines(tmp_path / d / "predictions.jsonl") for d in ("torch", "onnx"))
     assert len(torch_lines) == len(onnx_lines) > 0
     frames = [cv2.imread(str(p)) for p in sorted(user_folder.glob("frame*"))]
@@ -344,8 +338,8 @@ def test_onnx_gives_torch_poses(user_folder: Path, pose_ckpt: Path, detector_ckp
             np.testing.assert_allclose(b["box"], a["box"], rtol=0, atol=edge + 0.01)
     given = ["--box", "100,60,120,120"]
     with rotation_outputs() as rot6d:
-        _invoke("predict", *common, *given, "--out", tmp_path / "torch_box")
-    _invoke("predict", *common, *given, "--onnx", pose_onnx, "--out", tmp_path / "onnx_box")
+        cli_ok("predict", *common, *given, "--out", tmp_path / "torch_box")
+    cli_ok("predict", *common, *given, "--onnx", pose_onnx, "--out", tmp_path / "onnx_box")
     bound = _pose_rounding(pose_ckpt, rot6d)
     for a, b in zip(
         *(_lines(tmp_path / d / "predictions.jsonl") for d in ("torch_box", "onnx_box")), strict=True
@@ -449,13 +443,13 @@ def test_a_lens_dataset_carries_its_lens_and_predict_takes_it(
     np.testing.assert_array_equal(camera.dist, camera_preset("speedplus")["dist"])
     assert camera.size == (480, 300)
     by_data = tmp_path / "data"
-    _invoke("predict", "--data", lens_dataset, "--split", "train", "--ckpt", pose_ckpt, "--out", by_data,
+    cli_ok("predict", "--data", lens_dataset, "--split", "train", "--ckpt", pose_ckpt, "--out", by_data,
             "--no-vis")  # fmt: skip
     records = _lines(by_data / "predictions.jsonl")
     assert len(records) == 2 and all(r["R"] is not None for r in records)
     for r in records:
         one = tmp_path / f"one{r['im_id']}"
-        _invoke("predict", r["source"], "--ckpt", pose_ckpt, "--camera", lens_dataset / bop.CAMERA_FILE,
+        cli_ok("predict", r["source"], "--ckpt", pose_ckpt, "--camera", lens_dataset / bop.CAMERA_FILE,
                 "--box", ",".join(map(repr, r["box"])), "--out", one, "--no-vis")  # fmt: skip
         alone = _lines(one / "predictions.jsonl")[0]
         # the same image, camera (camera.json holds the scene_camera entry's values), network and box (the
@@ -499,7 +493,7 @@ def test_the_python_api_takes_what_the_cli_takes(user_folder: Path, pose_ckpt: P
     cv2.imwrite(str(folder / "a12.png"), twelve)
     cv2.imwrite(str(folder / "b12.png"), twelve)
     out = tmp_path / "out"
-    output = _invoke("predict", folder, "--ckpt", pose_ckpt, "--camera", user_folder / "camera.json", "--box",
+    output = cli_ok("predict", folder, "--ckpt", pose_ckpt, "--camera", user_folder / "camera.json", "--box",
                      ",".join(map(str, box)), "--out", out, "--no-vis")  # fmt: skip
     assert output.count("read as 12-bit data") == 1 and "a12.png" in output
     assert all(r["R"] == uint8.R.ravel().tolist() for r in _lines(out / "predictions.jsonl"))
@@ -514,8 +508,8 @@ def test_a_detection_under_the_score_floor_is_none(
     cv2.imwrite(str(folder / "black.png"), np.zeros((240, 320, 3), np.uint8))
     shutil.copy(sorted(user_folder.glob("frame*"))[0], folder / "frame.png")
     common = [folder, "--ckpt", pose_ckpt, "--detector", detector_ckpt, "--camera", "training", "--no-vis"]
-    _invoke("predict", *common, "--min-score", 0, "--out", tmp_path / "all")
-    _invoke("predict", *common, "--min-score", 1, "--out", tmp_path / "none")
+    cli_ok("predict", *common, "--min-score", 0, "--out", tmp_path / "all")
+    cli_ok("predict", *common, "--min-score", 1, "--out", tmp_path / "none")
     found, floored = (_lines(tmp_path / d / "predictions.jsonl") for d in ("all", "none"))
     assert all(r["R"] is not None and r["flags"] != ["no_detection"] for r in found)
     for a, b in zip(found, floored, strict=True):  # a score is a probability: under 1
@@ -611,8 +605,8 @@ def test_predict_batch_writes_the_one_at_a_time_records(
               "--min-score", 0, "--no-vis"]  # fmt: skip
     common += ["--passes", 1]  # rounding at one crop (re-crops: the batched path's test, _same_pose)
     with rotation_outputs() as rot6d:
-        _invoke("predict", *common, "--out", tmp_path / "one")
-    _invoke("predict", *common, "--batch", 3, "--out", tmp_path / "three")
+        cli_ok("predict", *common, "--out", tmp_path / "one")
+    cli_ok("predict", *common, "--batch", 3, "--out", tmp_path / "three")
     one, three = (_lines(tmp_path / d / "predictions.jsonl") for d in ("one", "three"))
     assert [r["source"] for r in one] == [r["source"] for r in three]
     bound = _pose_rounding(pose_ckpt, rot6d)
@@ -622,7 +616,7 @@ def test_predict_batch_writes_the_one_at_a_time_records(
         np.testing.assert_allclose(a["t"], b["t"], rtol=0, atol=bound.t * np.linalg.norm(a["t"]))
     for extra, message in [(["--track"], "take no --batch"), (["--filter"], "take no --batch"),
                            (["--cuda-graphs"], "CUDA graphs need")]:  # fmt: skip
-        output = _invoke(
+        output = cli_ok(
             "predict", *common, "--batch", 2, *extra, "--device", "cpu", "--out", tmp_path / "x", code=1
         )
         assert message in output and not (tmp_path / "x").exists()
@@ -655,7 +649,7 @@ def test_track_a_users_video_on_the_filter(
     _write_video(tmp_path / "clip.mp4", images)
     common = ("--ckpt", ckpt, "--detector", detector_ckpt, "--camera", user_folder / "camera.json",
               "--min-score", 0, "--track", "--no-vis")  # fmt: skip
-    _invoke("predict", tmp_path / "clip.mp4", *common, "--out", tmp_path / "video")
+    cli_ok("predict", tmp_path / "clip.mp4", *common, "--out", tmp_path / "video")
     records = _lines(tmp_path / "video" / "predictions.jsonl")
     assert [r["time_s"] for r in records] == [
         i * (1 / 10.0) for i in range(len(images))
@@ -664,15 +658,15 @@ def test_track_a_users_video_on_the_filter(
     # the untrained network's noise, calibrated, is wide: any two detections agree and start the filter
     assert records[0]["filter"] is None and all(r["filter"] is not None for r in records[1:])
     plain = [a for a in common if a != "--track"]
-    _invoke("predict", tmp_path / "clip.mp4", *plain, "--filter", "--out", tmp_path / "filtered")
+    cli_ok("predict", tmp_path / "clip.mp4", *plain, "--filter", "--out", tmp_path / "filtered")
     filtered = _lines(
         tmp_path / "filtered" / "predictions.jsonl"
     )  # the detector on every frame, then the filter
     assert [r["box_source"] for r in filtered] == ["detector"] * len(images)
     assert filtered[0]["filter"] is None and all(r["filter"] is not None for r in filtered[1:])
-    assert "give --dt" in _invoke("predict", user_folder, *common, "--out", tmp_path / "folder", code=1)
+    assert "give --dt" in cli_ok("predict", user_folder, *common, "--out", tmp_path / "folder", code=1)
     assert not (tmp_path / "folder").exists()
-    _invoke("predict", user_folder, *common, "--dt", 2.5, "--out", tmp_path / "folder")
+    cli_ok("predict", user_folder, *common, "--dt", 2.5, "--out", tmp_path / "folder")
     assert [r["time_s"] for r in _lines(tmp_path / "folder" / "predictions.jsonl")] == [
         2.5 * i for i in range(len(images))
     ]

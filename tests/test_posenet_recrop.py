@@ -33,7 +33,7 @@ from posenet.predict.recrop import box_iou, in_view, model_box, next_crop, proje
 from posenet.predict.sources import dataset_frames, load_frame
 from posenet.predict.track import DETECTOR, NONE, POSE, SEARCH_EVERY, TRACK, Tracker
 from scgen.io import read_sequence_frames
-from tests.posenet_helpers import tiny_pose_checkpoint
+from tests.posenet_helpers import cli_ok, tiny_pose_checkpoint
 from tests.test_posenet_predict import TINY_DETECTOR
 
 # The annotated bbox_obj spans the pixel centres the silhouette covers; the projected vertices' extent,
@@ -216,12 +216,6 @@ def test_a_tracked_sequence_keeps_its_target(sequence_dataset: Path, sequence_ck
         assert tracked.estimate is not None and tracked.step.prior is not None
 
 
-def _invoke(*args: object) -> str:
-    res = CliRunner().invoke(main, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
-    return res.output
-
-
 def test_predict_track_on_a_sequence_dataset(
     sequence_dataset: Path, sequence_ckpt: Path, tmp_path_factory: pytest.TempPathFactory
 ):
@@ -231,17 +225,17 @@ def test_predict_track_on_a_sequence_dataset(
     root = tmp_path_factory.mktemp("track")
     (root / "tiny.yaml").write_text(TINY_DETECTOR)
     data = ["--data", sequence_dataset]
-    _invoke("train-detector", *data, "--out", root / "det", "--config", root / "tiny.yaml", "--max-steps", 1)
+    cli_ok("train-detector", *data, "--out", root / "det", "--config", root / "tiny.yaml", "--max-steps", 1)
     ckpt = root / "last.pt"  # a copy: the shared checkpoint stays read-only, with no noise beside it
     shutil.copy(sequence_ckpt, ckpt)
     track = ("predict", *data, "--ckpt", ckpt, "--detector", root / "det" / "last.pt", "--track",
              "--min-score", 0, "--out", root / "pred")  # fmt: skip
     refused = CliRunner().invoke(main, [str(a) for a in track])
     assert refused.exit_code != 0 and "posenet calibrate" in refused.output and not (root / "pred").exists()
-    _invoke(
+    cli_ok(
         "calibrate", *data, "--ckpt", ckpt, "--split", "train", "--min-confidence", 0
     )  # untrained: never confident
-    output = _invoke(*track)
+    output = cli_ok(*track)
     records = [json.loads(line) for line in (root / "pred" / "predictions.jsonl").read_text().splitlines()]
     order = read_sequence_frames(sequence_dataset)
     seen = [order[r["scene_id"], r["im_id"]] for r in records]
