@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from scgen.assets.primitives import Part, box, cylinder, dish, nozzle
+from scgen.assets.primitives import Part, box, cylinder, dish, nozzle, revolve
 from scgen.scenes.model import DEFAULT_DIAMETER_M, TargetModel, normalise_parts
 
 # a body of revolution about the object frame's z axis, through its origin: the upper stage's (BOP: the
@@ -119,7 +119,7 @@ def geosat_parts() -> list[Part]:
 
 def _revolved(profile: np.ndarray, material: str, sections: int = 64) -> Part:
     """A body of revolution about z from its (radius, z) profile."""
-    return material, trimesh.creation.revolve(profile, sections=sections)
+    return material, revolve(profile, sections=sections)
 
 
 def upper_stage_parts() -> list[Part]:

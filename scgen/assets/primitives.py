@@ -21,6 +21,15 @@ def cylinder(p0, p1, radius: float, material: str, sections: int = 16) -> Part:
     return material, trimesh.creation.cylinder(radius=radius, segment=[p0, p1], sections=sections)
 
 
+def revolve(profile: np.ndarray, sections: int) -> trimesh.Trimesh:
+    """The solid swept by a closed (radius, z) profile about z, its faces wound outward (positive volume)
+    whichever way the profile runs: a one-sided renderer (Mitsuba's BSDFs) shades only a face's front."""
+    mesh = trimesh.creation.revolve(profile, sections=sections)
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
 def dish(centre, radius: float, depth: float, material: str) -> Part:
     """A thin parabolic reflector, opening towards +z, built by revolving its profile."""
     r = np.linspace(0.0, radius, 24)
@@ -28,7 +37,7 @@ def dish(centre, radius: float, depth: float, material: str) -> Part:
     inner = np.column_stack([r, z])
     outer = np.column_stack([r[::-1], z[::-1] - 0.01])
     profile = np.vstack([inner, outer])
-    m = trimesh.creation.revolve(profile, sections=48)
+    m = revolve(profile, sections=48)
     m.apply_translation(centre)
     return material, m
 
@@ -39,6 +48,6 @@ def nozzle(centre, radius: float, length: float, material: str) -> Part:
     r = radius * (0.35 + 0.65 * s**1.5)
     z = -length * s
     profile = np.vstack([np.column_stack([r, z]), np.column_stack([r[::-1] * 0.9, z[::-1]])])
-    m = trimesh.creation.revolve(profile, sections=24)
+    m = revolve(profile, sections=24)
     m.apply_translation(centre)
     return material, m
