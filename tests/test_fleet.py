@@ -51,6 +51,14 @@ def test_every_bundled_model_has_a_builder_and_is_what_it_builds():
         assert info["diameter"] == pytest.approx(built.diameter * bop.MM_PER_M)
 
 
+@pytest.mark.parametrize("name", BUNDLED_MODELS)
+def test_every_part_faces_outward(name):
+    """Each part of each bundled model encloses a positive volume (divergence theorem over its faces): its
+    faces are wound outward, the side a one-sided BSDF (Mitsuba's) shades."""
+    for material, mesh in load_target(name).parts:
+        assert mesh.volume > 0, f"{name}: a {material} part of {len(mesh.faces)} faces is wound inward"
+
+
 def test_the_upper_stage_looks_the_same_turned_about_its_axis_by_any_angle():
     model = load_target("upper_stage")
     assert model.symmetries == Z_AXIS_SYMMETRY
