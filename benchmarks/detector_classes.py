@@ -6,10 +6,10 @@ Trains `posenet train-detector`'s loop on every object of DIR (one class per obj
 into RUN, resuming RUN/last.pt where it exists (with --minutes, a new run fitted to that wall time; a run
 already in RUN is scored as it is), then scores RUN/best.pt (RUN/last.pt without a val split) on the test
 split, class by class: every ground-truth instance with a visible pixel (its box the one the detector
-learns, bbox_obj clipped to the image) is matched to a kept box of its class, greedily by IoU (each box
-matched once; an unmatched instance counts IoU 0). Printed per class and over all instances: instances,
-mean IoU, the share at IoU >= 0.5, and the kept boxes of the class matched to no instance (false
-positives, at the detector's score threshold).
+learns, bbox_obj clipped to the image) is matched to a box of its class scoring at least `posenet
+predict`'s floor (posenet.detection.options.MIN_SCORE), greedily by IoU (each box matched once; an
+unmatched instance counts IoU 0). Printed per class and over all instances: instances, mean IoU, the
+share at IoU >= 0.5, and the class's boxes over the floor matched to no instance (false positives).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from harness import parser, run_script
 
 from posenet.detection.detect import detect, detector_dataset, detector_obj_ids, iou, load_detector
 from posenet.detection.detector import image_groups, load_detector_config, target_boxes
+from posenet.detection.options import MIN_SCORE
 from posenet.detection.train import BEST, train_detector
 from posenet.evaluation.evaluate import format_table
 from posenet.training.train import LAST
@@ -74,13 +75,15 @@ def run(args: argparse.Namespace) -> None:
     unmatched = dict.fromkeys(classes, 0)
     for det, instances in zip(dets, images, strict=True):
         for k in classes:
-            found = [f.box for f in det.found if f.obj_id == k]
+            found = [f.box for f in det.found if f.obj_id == k and f.score >= MIN_SCORE]
             got, extra = match_class(found, target_boxes([i for i in instances if i.obj_id == k]))
             ious[k] += got
             unmatched[k] += extra
     rows = [table_row(f"{k} {names.get(k, '')}", ious[k], unmatched[k]) for k in classes]
     rows.append(table_row("all", [v for k in classes for v in ious[k]], sum(unmatched.values())))
-    print(f"checkpoint: {ckpt} (step {state['step']}), test split, {len(images)} images")
+    print(
+        f"checkpoint: {ckpt} (step {state['step']}), test split, {len(images)} images, score >= {MIN_SCORE}"
+    )
     print(format_table(["class (obj_id)", "instances", "mean IoU", "IoU>=0.5 (%)", "unmatched boxes"], rows))
 
 
