@@ -19,6 +19,8 @@ from scgen.errors import ScgenError
 from scgen.generator import Generator
 from scgen.io import bop
 from scgen.io.buffers import BACKGROUND_ID, TARGET_ID, object_instance_id
+from scgen.render.mitsuba import raycast
+from scgen.render.objects import objects_alone_depth
 from scgen.scenes import load_config
 from scgen.scenes.geometry import quat_to_matrix
 from scgen.scenes.motion.orbit import Orbit, hcw_stm
@@ -221,3 +223,22 @@ def test_render_refuses_a_missing_object_model_in_one_line_and_writes_nothing(tm
     line = result.output.strip().splitlines()[-1]
     assert line.startswith("Error:") and "objects[0].model" in line and "servicer.glb" in line
     assert not out.exists()
+
+
+def test_through_a_lens_each_object_alone_is_its_whole_image_cast():
+    """With lens distortion a straight edge's image bends past its corners' box: the cast of each object
+    alone (over the pixels image_box keeps) equals a cast over every pixel of the image."""
+    gen = Generator.load(config=EXAMPLE, seed=5, resolution=(240, 150), camera="speedplus", backend="mitsuba")
+    raycast.start()
+    checked = 0
+    for i in range(3):
+        spec = gen.scene(i)
+        assert not spec.camera.pinhole
+        for obj, alone in zip(spec.objects, objects_alone_depth(spec, gen.models), strict=True):
+            model = gen.models[obj.obj_id]
+            shape = raycast.place_mesh("whole", model.mesh.vertices, model.mesh.faces, obj.pose.R_mat,
+                                       obj.pose.t_vec)  # fmt: skip
+            _, whole = raycast.cast([shape], spec.camera, (0, 0, spec.camera.width, spec.camera.height))
+            assert ((alone > 0) == (whole > 0)).all()
+            checked += int((alone > 0).sum())
+    assert checked > 0

@@ -17,7 +17,7 @@ import trimesh
 from scgen.io.buffers import object_instance_id
 from scgen.scenes.model import TargetModel
 from scgen.scenes.projection import projection_box
-from scgen.scenes.spec import Pose, SceneSpec
+from scgen.scenes.spec import CameraSpec, Pose, SceneSpec
 
 
 @dataclass(frozen=True)
@@ -63,13 +63,35 @@ def objects_alone_depth(spec: SceneSpec, models: Mapping[int, TargetModel]) -> t
         vertices, faces = np.asarray(model.mesh.vertices), np.asarray(model.mesh.faces)
         R, t = obj.pose.R_mat, obj.pose.t_vec
         depth = np.zeros((cam.height, cam.width), np.float32)
-        box = projection_box(vertices, R, t, cam)
+        box = image_box(vertices @ R.T + t, cam)
         if box is not None:
-            x0, y0 = max(box[0], 0), max(box[1], 0)
-            x1, y1 = min(box[0] + box[2], cam.width), min(box[1] + box[3], cam.height)
-            if x0 < x1 and y0 < y1:
-                shape = raycast.place_mesh("alone", vertices, faces, R, t)
-                _, d = raycast.cast([shape], cam, (x0, y0, x1 - x0, y1 - y0))
-                depth[y0:y1, x0:x1] = d
+            x0, y0, x1, y1 = box
+            shape = raycast.place_mesh("alone", vertices, faces, R, t)
+            _, d = raycast.cast([shape], cam, (x0, y0, x1 - x0, y1 - y0))
+            depth[y0:y1, x0:x1] = d
         out.append(depth)
     return tuple(out)
+
+
+def image_box(points: np.ndarray, cam: CameraSpec) -> tuple[int, int, int, int] | None:
+    """Columns [x0, x1) and rows [y0, y1) of the image holding every pixel whose ray may meet the convex
+    hull of camera-frame `points`: with a pinhole, around their projections (projection_box); through a
+    lens, whose images of straight edges bend, the pixels whose undistorted rays (CameraSpec.pixel_rays)
+    fall in the box of the points' pinhole images. The whole image where a point is behind the camera;
+    None where no pixel is in reach."""
+    W, H = cam.width, cam.height
+    if not (points[:, 2] > 0).all():
+        return 0, 0, W, H
+    if cam.pinhole:
+        box = projection_box(points, np.eye(3), np.zeros(3), cam)
+        if box is None:
+            return None
+        x0, y0, x1, y1 = max(box[0], 0), max(box[1], 0), min(box[0] + box[2], W), min(box[1] + box[3], H)
+        return (x0, y0, x1, y1) if x0 < x1 and y0 < y1 else None
+    xy = points[:, :2] / points[:, 2:3]
+    rays = cam.pixel_rays()
+    inside = ((rays[..., :2] >= xy.min(axis=0)) & (rays[..., :2] <= xy.max(axis=0))).all(axis=-1)
+    ys, xs = np.nonzero(inside)
+    if len(xs) == 0:
+        return None
+    return int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1
