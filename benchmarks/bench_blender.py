@@ -32,10 +32,11 @@ from harness import parser, run_script
 
 from scgen import Generator
 from scgen.annotate import annotate
-from scgen.dataset.layout import Layout
+from scgen.dataset.layout import OBJ_ID, Layout
 from scgen.dataset.writer import WriteOptions, write_sample
 from scgen.render.blender.backend import BlenderBackend
 from scgen.render.blender.settings import FILTER_REACH_PX, PRESETS, QualityPreset, configure_beauty
+from scgen.render.objects import model_hulls
 from scgen.render.region import full_frame, scene_region, traced_share
 from scgen.run.runner import write_static_files
 from scgen.scenes import load_config
@@ -96,12 +97,12 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
     scene = backend.scene
     stamps: list[tuple[float, str]] = []
     bpy.app.handlers.render_stats.append(lambda stats: stamps.append((time.perf_counter(), stats)))
-    hull = np.asarray(generator.model.mesh.convex_hull.vertices, np.float64)
+    hulls = model_hulls(generator.models)
     paths = {  # what each path traces: the whole frame, one box around every object with 16 px for the
         # denoiser (the region path from f325401 to c91b707; Mitsuba's, without the margin), a box per object
         # or group of overlapping objects (now)
         "full frame": lambda spec: (full_frame(spec.camera.width, spec.camera.height),),
-        "one box": lambda spec: (scene_region(spec, hull, FILTER_REACH_PX, ONE_BOX_MARGIN_PX),),
+        "one box": lambda spec: (scene_region(spec, hulls, FILTER_REACH_PX, ONE_BOX_MARGIN_PX),),
         "regions": backend.regions,
     }
     times: dict[str, dict[str, list[float]]] = {m: {} for m in paths}
@@ -145,7 +146,7 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
                 beauty_stages = cycles_stages(t0, time.perf_counter())
                 stamps.clear()
                 instance, depth = blender_backend.instance_and_depth(beauty)
-                alone = blender_backend.props_may_hide_target(spec, hull, instance, depth)
+                alone = blender_backend.props_may_hide_target(spec, hulls[OBJ_ID], instance, depth)
                 aux = timed("aux render (labels)", mode, scene.render_aux, alone)
                 buffers = timed("label passes", mode, blender_backend.buffers_from_passes, spec, beauty, aux)
                 background = timed("background", mode, blender_backend.background_image, spec)
