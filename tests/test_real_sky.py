@@ -10,9 +10,11 @@ from scipy.spatial import cKDTree
 from scgen.generator import Generator
 from scgen.io.buffers import BACKGROUND_ID
 from scgen.render.lighting import SOLAR_CONSTANT, body_albedo_light, exposure_scale
+from scgen.render.sky import bluemarble
 from scgen.render.sky.backgrounds import background_image
 from scgen.render.sky.earth_surface import CLOUD_THRESHOLD, cloud_cover, disc_albedo
 from scgen.render.sky.stars import SUN_V, pixel_solid_angle, project_stars, star_image, tint
+from scgen.render.sky.textures import lat_lon
 from scgen.scenes import load_config
 from scgen.scenes.geometry import orthonormal_basis, unit_sphere_hits
 from scgen.scenes.model import load_target
@@ -172,3 +174,14 @@ def test_a_render_shows_the_stars_only_when_boosted():
     u, v = np.round(uv[np.argmin(hp)]).astype(int)
     assert sky[v, u] and images[24.0][v, u] > 0
     assert (images[24.0][sky] > 0).sum() >= 5
+
+
+def test_a_lookup_whose_pixels_all_read_one_level_reads_it_alone():
+    """Points at whole levels of detail (every pixel magnified, lod clipped to 0, or on a level exactly)
+    blend no next level: the lookup is the one level's bilinear sample, not an error."""
+    q = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    for lod in (np.full(3, -2.0), np.full(3, 1.0)):
+        at = lat_lon(q)
+        level = int(np.clip(lod[0], 0, None))
+        expected = bluemarble._bilinear(bluemarble.pyramid()[level], *at)
+        assert np.array_equal(bluemarble.lookup(q, lod, at), expected)

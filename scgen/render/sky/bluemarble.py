@@ -99,6 +99,8 @@ def _bilinear(level: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray
 def _remap(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Bilinear samples (N x channels) of an image at pixel coordinates x, y (N), wrapping around."""
     n = len(x)
+    if n == 0:  # cv2.remap takes no empty map (every pixel of a level magnified: no blend to the next)
+        return np.zeros((0, image.shape[2] if image.ndim == 3 else 1), image.dtype)
     rows = -(-n // REMAP_WIDTH)  # cv2.remap takes at most 32767 rows: lay the points out as a block
     x, y = (np.resize(np.asarray(c, np.float32), rows * REMAP_WIDTH).reshape(rows, -1) for c in (x, y))
     out = cv2.remap(image, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
