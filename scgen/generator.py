@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from scgen.annotate import Annotation, annotate, annotate_objects
+from scgen.io.bop import TARGET_OBJ_ID
 from scgen.io.buffers import Buffers
 from scgen.scenes import SceneSpec, TargetShape, load_config, sample_scene
 from scgen.scenes.config.objects import object_models
@@ -85,33 +86,36 @@ class Generator:
         return sample_scene(self.seed, index, self.cfg, self.shape, self.object_draws)
 
     @functools.cached_property
-    def models(self) -> dict[int, TargetModel]:
-        """The dataset's objects by BOP obj_id: 1 the target, then each `[[objects]]` model not named before
-        (scgen.scenes.config.objects.object_models), loaded with the target's keep_scale."""
-        source, keep_scale = self.model_source or (None, False)
-        keys = object_models(self.cfg, str(source) if source else self.model.name)
-        others = {k: load_target(m, keep_scale=keep_scale) for k, m in enumerate(keys[1:], 2)}
-        return {1: self.model, **others}
+    def _object_keys(self) -> list[str]:
+        """The models by obj_id - 1: the target's, then each `[[objects]]` model not named before
+        (scgen.scenes.config.objects.object_models)."""
+        source = self.model_source[0] if self.model_source else None
+        return object_models(self.cfg, str(source) if source else self.model.name)
 
     @functools.cached_property
-    def companions(self) -> tuple[Companion, ...]:
-        """What a sequence moves of each `[[objects]]` entry (none without the table)."""
-        masses = {k: mass_properties([mesh for _, mesh in m.parts]) for k, m in self.models.items() if k > 1}
-        return tuple(
-            Companion(d.obj_id, d.shape.radius, masses[d.obj_id], d.entry) for d in self.object_draws
-        )
+    def models(self) -> dict[int, TargetModel]:
+        """The dataset's objects by BOP obj_id: the target, then each `[[objects]]` model (`_object_keys`),
+        loaded with the target's keep_scale."""
+        keep_scale = self.model_source[1] if self.model_source else False
+        others = {k: load_target(m, keep_scale=keep_scale) for k, m in enumerate(self._object_keys[1:], 2)}
+        return {TARGET_OBJ_ID: self.model, **others}
 
     @functools.cached_property
     def object_draws(self) -> tuple[ObjectDraw, ...]:
         """What the sampler places of each `[[objects]]` entry (none without the table)."""
         entries = self.cfg.get("objects", ())
-        if not entries:
-            return ()
-        source = self.model_source[0] if self.model_source else None
-        keys = object_models(self.cfg, str(source) if source else self.model.name)
-        shapes = {k: TargetShape.from_mesh(m.mesh, m.diameter) for k, m in self.models.items()}
-        ids = [keys.index(e["model"]) + 1 for e in entries]
+        ids = [self._object_keys.index(e["model"]) + 1 for e in entries]
+        shapes = {k: TargetShape.from_mesh(self.models[k].mesh, self.models[k].diameter) for k in set(ids)}
         return tuple(ObjectDraw(k, shapes[k], e) for k, e in zip(ids, entries, strict=True))
+
+    @functools.cached_property
+    def companions(self) -> tuple[Companion, ...]:
+        """What a sequence moves of each `[[objects]]` entry (none without the table)."""
+        ids = {d.obj_id for d in self.object_draws}
+        masses = {k: mass_properties([mesh for _, mesh in self.models[k].parts]) for k in ids}
+        return tuple(
+            Companion(d.obj_id, d.shape.radius, masses[d.obj_id], d.entry) for d in self.object_draws
+        )
 
     @property
     def frames(self) -> int:

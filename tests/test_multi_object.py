@@ -242,3 +242,12 @@ def test_through_a_lens_each_object_alone_is_its_whole_image_cast():
             assert ((alone > 0) == (whole > 0)).all()
             checked += int((alone > 0).sum())
     assert checked > 0
+
+
+def test_a_sequence_may_place_more_of_the_targets_own_model(tmp_path):
+    """An `[[objects]]` entry naming the target's model adds instances of obj_id 1, each on its own orbit."""
+    config = tmp_path / "more_of_the_target.toml"
+    config.write_text('[sequence]\nframes = 3\ndt_s = 10.0\n\n[[objects]]\nmodel = "spacecraft"\ncount = 2\n')
+    gen = Generator.load(config=config, seed=7, resolution=(160, 120), backend="mitsuba")
+    frames = gen.sequence(0)
+    assert sorted(gen.models) == [1] and all([o.obj_id for o in f.objects] == [1, 1] for f in frames)
