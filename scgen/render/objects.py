@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from scgen.io.bop import TARGET_OBJ_ID
 from scgen.io.buffers import object_instance_id
 from scgen.scenes.model import TargetModel
 from scgen.scenes.projection import projection_box
@@ -25,22 +26,28 @@ class ObjectPart:
     """One material part of a labelled object: its mesh in the model frame, placed by `pose`."""
 
     instance: int  # its object's instance id (scgen.io.buffers.object_instance_id)
+    obj_id: int
+    part: int  # its index in the model's parts
     material: str
     mesh: trimesh.Trimesh
     pose: Pose
-    diameter: float  # its model's (the materials' texture scale)
 
 
 def object_parts(spec: SceneSpec, models: Mapping[int, TargetModel]) -> list[ObjectPart]:
     """Every part of every labelled object of `spec` beside the target, object by object."""
-    return [ObjectPart(object_instance_id(j), material, mesh, obj.pose, models[obj.obj_id].diameter)
+    return [ObjectPart(object_instance_id(j), obj.obj_id, k, material, mesh, obj.pose)
             for j, obj in enumerate(spec.objects)
-            for material, mesh in models[obj.obj_id].parts]  # fmt: skip
+            for k, (material, mesh) in enumerate(models[obj.obj_id].parts)]  # fmt: skip
 
 
 def object_hulls(spec: SceneSpec, hulls: Mapping[int, np.ndarray]) -> list[np.ndarray]:
     """Each labelled object's convex hull vertices (`hulls` by obj_id, model frame) in the camera frame."""
     return [hulls[obj.obj_id] @ obj.pose.R_mat.T + obj.pose.t_vec for obj in spec.objects]
+
+
+def with_target(model: TargetModel, models: Mapping[int, TargetModel] | None) -> dict[int, TargetModel]:
+    """A backend's models by obj_id: `models` (None: none but the target) with the target's, `model`."""
+    return {**(models or {}), TARGET_OBJ_ID: model}
 
 
 def model_hulls(models: Mapping[int, TargetModel]) -> dict[int, np.ndarray]:

@@ -65,12 +65,7 @@ def sample_scene(
     distance = float(factor_rng(seed, index, "distance").uniform(d_min, d_max))
     radius_px = f * 0.5 * diameter_m / distance
 
-    pos_rng = factor_rng(seed, index, "position")
-    margin = min(cfg["position"]["inside_radius_frac"] * radius_px, 0.45 * min(camera.width, camera.height))
-    u = pos_rng.uniform(margin, camera.width - 1 - margin)
-    v = pos_rng.uniform(margin, camera.height - 1 - margin)
-    ray = backproject(K, u, v, 1.0)
-    t = distance * ray / np.linalg.norm(ray)
+    t = _in_frame(factor_rng(seed, index, "position"), cfg, camera, radius_px, distance)
     R, cone = sample_attitude(factor_rng(seed, index, "pose"), cfg["pose"], t)
     target_cam = shape.in_camera(R, t)
     view = camera_view(K, camera.width, camera.height, target_cam)
@@ -115,6 +110,19 @@ def sample_scene(
     )
 
 
+def _in_frame(
+    rng: np.random.Generator, cfg: dict[str, Any], camera: CameraSpec, radius_px: float, distance: float
+) -> np.ndarray:
+    """An object's centre at `distance` from the camera, its image uniform over the frame at least
+    `position.inside_radius_frac` of its projected radius `radius_px` inside (at most 0.45 of the frame's
+    shorter side)."""
+    margin = min(cfg["position"]["inside_radius_frac"] * radius_px, 0.45 * min(camera.width, camera.height))
+    u = rng.uniform(margin, camera.width - 1 - margin)
+    v = rng.uniform(margin, camera.height - 1 - margin)
+    ray = backproject(camera.K_mat, u, v, 1.0)
+    return distance * ray / np.linalg.norm(ray)
+
+
 def _prop_ball(prop: PropSpec) -> tuple[np.ndarray, float]:
     return prop.pose.t_vec, bounding_radius(prop.shape, np.asarray(prop.size))
 
@@ -136,12 +144,7 @@ def _sample_objects(
             for _ in range(OBJECT_TRIES):
                 distance = rng.uniform(d_min, d_max)
                 radius_px = camera.focal * 0.5 * obj.shape.diameter / distance
-                margin = min(cfg["position"]["inside_radius_frac"] * radius_px,
-                             0.45 * min(camera.width, camera.height))  # fmt: skip
-                u = rng.uniform(margin, camera.width - 1 - margin)
-                v = rng.uniform(margin, camera.height - 1 - margin)
-                ray = backproject(camera.K_mat, u, v, 1.0)
-                t = distance * ray / np.linalg.norm(ray)
+                t = _in_frame(rng, cfg, camera, radius_px, distance)
                 clearance = min(np.linalg.norm(t - c) - (r + obj.shape.radius) for c, r in taken)
                 if best is None or clearance > best[0]:
                     best = (clearance, t)

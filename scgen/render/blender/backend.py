@@ -26,7 +26,7 @@ from scgen.render.blender.env import import_bpy, select_device
 from scgen.render.blender.scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender.settings import FILTER_REACH_PX, preset
 from scgen.render.camera import record_image, render_camera
-from scgen.render.objects import model_hulls, objects_alone_depth
+from scgen.render.objects import model_hulls, objects_alone_depth, with_target
 from scgen.render.region import Region, full_frame, region_render, scene_regions
 from scgen.render.sky.backgrounds import background_image
 from scgen.scenes.geometry import project
@@ -69,7 +69,7 @@ class BlenderBackend:
         # removed on close(), or when the backend is collected or the interpreter exits unclosed
         self._remove_workdir = weakref.finalize(self, shutil.rmtree, self._workdir, True)
         gpu = self.device != "CPU"
-        self.models = {**(models or {}), TARGET_OBJ_ID: model}
+        self.models = with_target(model, models)
         self.scene = BlenderScene(self._bpy, model, quality_preset, gpu, threads, self._workdir, self.models)
         self._hulls = model_hulls(self.models)
         self._model, self._rays = model, None

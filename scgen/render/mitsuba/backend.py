@@ -38,7 +38,7 @@ from scgen.render.mitsuba.ray_cull import may_hit
 from scgen.render.mitsuba.raycast import cast_rays, intersect_from_origin, select_variant
 from scgen.render.mitsuba.slots import MeshSlot, build_mesh
 from scgen.render.mitsuba.window import PIXEL_FILTER, REACH_PX, film_window
-from scgen.render.objects import model_hulls, object_parts, objects_alone_depth
+from scgen.render.objects import model_hulls, object_parts, objects_alone_depth, with_target
 from scgen.render.props import prop_mesh
 from scgen.render.region import Region, full_frame, region_render, scene_region
 from scgen.render.sky.backgrounds import background_image
@@ -90,10 +90,10 @@ class MitsubaBackend:
         self._classes: dict[str, list[int]] = {}  # material class -> its parts, one target mesh each
         for k, (material, _) in enumerate(model.parts):
             self._classes.setdefault(material, []).append(k)
-        self._uv: dict[tuple[int, str], np.ndarray] = {}  # (part, class rendered) -> the part's UVs
+        self._uv: dict[tuple[int, int, str], np.ndarray] = {}  # (obj_id, part, class rendered) -> UVs
         self._finishes = TargetFinishes(FINISHES_PER_CLASS)
         self._reach = 1.01 * float(np.linalg.norm(model.mesh.vertices, axis=1).max())  # target's radius
-        self.models = {**(models or {}), TARGET_OBJ_ID: model}
+        self.models = with_target(model, models)
         self._hulls = model_hulls(self.models)
         self.trace_region = region_render() if region is None else region
         self.window = full_frame(1, 1)  # the last render's film window, for tests and benchmarks
@@ -152,7 +152,7 @@ class MitsubaBackend:
             drawn = spec.finish[cls]["material"] if cls in spec.finish else cls
             corners = np.concatenate([transform_points(mesh.vertices, T)[mesh.faces].reshape(-1, 3)
                                       for mesh in (self.model.parts[k][1] for k in parts)])  # fmt: skip
-            uv = np.concatenate([self._part_uv(k, drawn) for k in parts])
+            uv = np.concatenate([self._part_uv(TARGET_OBJ_ID, k, drawn) for k in parts])
             slot = self._target_slots[name]
             slot.fill(corners, uv)
             filled.add(name)
@@ -170,9 +170,8 @@ class MitsubaBackend:
             instance = prop_instance_id(len(spec.objects), k)
             by_material.setdefault(prop.material, []).append((instance, corners, uv))
         for part in object_parts(spec, self.models):
-            faces = np.asarray(part.mesh.faces)
-            uv = box_uv(np.asarray(part.mesh.vertices), faces, texture_scale(part.material, part.diameter))
-            corners = transform_points(part.mesh.vertices, part.pose.matrix)[faces].reshape(-1, 3)
+            uv = self._part_uv(part.obj_id, part.part, part.material)
+            corners = transform_points(part.mesh.vertices, part.pose.matrix)[part.mesh.faces].reshape(-1, 3)
             by_material.setdefault(part.material, []).append((part.instance, corners, uv))
         for material, slot in self._prop_slots.items():
             pieces = by_material.get(material, [])
@@ -183,13 +182,14 @@ class MitsubaBackend:
                 layout.owners.append(np.concatenate([np.full(len(c) // 3, k) for k, c, _ in pieces]))
         return layout
 
-    def _part_uv(self, k: int, material: str) -> np.ndarray:
-        """Target part k's UVs, scaled for the material class it is rendered with."""
-        if (k, material) not in self._uv:
-            mesh = self.model.parts[k][1]
-            scale = texture_scale(material, self.model.diameter)
-            self._uv[k, material] = box_uv(np.asarray(mesh.vertices), np.asarray(mesh.faces), scale)
-        return self._uv[k, material]
+    def _part_uv(self, obj_id: int, k: int, material: str) -> np.ndarray:
+        """Object `obj_id`'s part k's UVs, scaled for the material class it is rendered with."""
+        if (obj_id, k, material) not in self._uv:
+            model = self.models[obj_id]
+            mesh = model.parts[k][1]
+            scale = texture_scale(material, model.diameter)
+            self._uv[obj_id, k, material] = box_uv(np.asarray(mesh.vertices), np.asarray(mesh.faces), scale)
+        return self._uv[obj_id, k, material]
 
     def render(self, spec: SceneSpec) -> Buffers:
         layout = self._fill(spec)

@@ -34,3 +34,12 @@ def check_positive(name: str, value: Any) -> None:
 def check_choice(name: str, value: Any, allowed: tuple[Any, ...]) -> None:
     if value not in allowed:
         raise ScgenError(f"{name} must be one of {', '.join(map(str, allowed))}, got {value!r}")
+
+
+def check_distance(name: str, distance: dict[str, Any]) -> None:
+    """A `distance` table (top-level or an `[[objects]]` entry's `name`): a metric range, or else a
+    projected-diameter range in pixels."""
+    if distance["range_m"] is None:
+        check_range(f"{name}.min_px/max_px", [distance["min_px"], distance["max_px"]], low=1.0)
+    else:
+        check_range(f"{name}.range_m", distance["range_m"], low=1e-6)

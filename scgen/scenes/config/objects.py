@@ -17,13 +17,11 @@ from typing import Any
 from scgen.errors import ScgenError
 from scgen.scenes.attitude import check_pose
 from scgen.scenes.bundled_models import BUNDLED_MODELS, DEFAULT_MODEL
-from scgen.scenes.config.checks import check_range
+from scgen.scenes.config.checks import check_distance, check_range
 
 ENTRY_KEYS = ("model", "count", "distance", "pose", "separation_m")
 SEPARATION_M = [8.0, 20.0]  # with [sequence]: the ellipse centre's distance from the target along V-bar (m)
 MAX_INSTANCES = 64  # labelled objects a scene may hold beside the target (BOP's GT ids are per image)
-UNIFORM_POSE = {"distribution": "uniform", "nominal": [1.0, 0.0, 0.0, 0.0], "max_angle_deg": 20.0,
-                "roll_deg": [-20.0, 20.0]}  # fmt: skip
 
 
 def merge_objects(entries: Any, folder: Path | None) -> list[dict[str, Any]]:
@@ -47,9 +45,10 @@ def merge_objects(entries: Any, folder: Path | None) -> list[dict[str, Any]]:
     return out
 
 
-def resolve_objects(cfg: dict[str, Any]) -> None:
-    """Fill each entry's defaults (count 1, the top-level distance, a uniform pose) and check it: a model
-    that exists, a count in [1, MAX_INSTANCES], the distance and pose as the top-level ones are checked."""
+def resolve_objects(cfg: dict[str, Any], default_pose: dict[str, Any]) -> None:
+    """Fill each entry's defaults (count 1, the top-level distance, `default_pose`: the built-in pose table,
+    uniform) and check it: a model that exists, a count in [1, MAX_INSTANCES], the distance and pose as
+    the top-level ones are checked."""
     entries = cfg["objects"]
     total = 0
     for i, entry in enumerate(entries):
@@ -63,14 +62,10 @@ def resolve_objects(cfg: dict[str, Any]) -> None:
             raise ScgenError(f"{name}.count must be an integer in [1, {MAX_INSTANCES}], got {count!r}")
         total += count
         entry["distance"] = _table(name, "distance", cfg["distance"], entry.get("distance"))
-        entry["pose"] = _table(name, "pose", UNIFORM_POSE, entry.get("pose"))
+        entry["pose"] = _table(name, "pose", default_pose, entry.get("pose"))
         entry.setdefault("separation_m", list(SEPARATION_M))
         check_range(f"{name}.separation_m", entry["separation_m"], low=1e-6)
-        distance = entry["distance"]
-        if distance["range_m"] is None:
-            check_range(f"{name}.distance.min_px/max_px", [distance["min_px"], distance["max_px"]], low=1.0)
-        else:
-            check_range(f"{name}.distance.range_m", distance["range_m"], low=1e-6)
+        check_distance(f"{name}.distance", entry["distance"])
         try:
             check_pose(entry["pose"])
         except ScgenError as exc:

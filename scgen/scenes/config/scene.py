@@ -21,7 +21,7 @@ from scgen.io.cores import physical_memory_bytes
 from scgen.io.yaml_file import NUMBER_FORM, load_yaml
 from scgen.scenes.attitude import check_pose
 from scgen.scenes.config.camera import DEFAULT_CAMERA, camera_preset, check_camera, scale_pixel_sizes
-from scgen.scenes.config.checks import check_prob, check_range, is_number
+from scgen.scenes.config.checks import check_distance, check_prob, check_range, is_number
 from scgen.scenes.config.objects import merge_objects, resolve_objects
 from scgen.scenes.factors import BACKGROUND_KINDS, ILLUMINATION_LEVELS, OCCLUSION_GROUPS
 from scgen.scenes.finish import FINISH_MODES
@@ -274,11 +274,7 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
         cam[key] = (cam[size] - 1) / 2 if cam[key] is None else float(cam[key])
     check_camera(cam)
 
-    dist = cfg["distance"]
-    if dist["range_m"] is None:
-        check_range("distance.min_px/max_px", [dist["min_px"], dist["max_px"]], low=1.0)
-    else:
-        check_range("distance.range_m", dist["range_m"], low=1e-6)
+    check_distance("distance", cfg["distance"])
 
     check_pose(cfg["pose"])
     occ = cfg["occluders"]
@@ -309,7 +305,7 @@ def resolve(cfg: dict[str, Any]) -> dict[str, Any]:
     if "sequence" in cfg:
         check_sequence(cfg["sequence"])
     if "objects" in cfg:
-        resolve_objects(cfg)
+        resolve_objects(cfg, DEFAULT_CONFIG["pose"])
     if not 0 <= cfg["illumination"]["max_phase_deg"] <= 180:
         raise ScgenError("illumination.max_phase_deg must lie in [0, 180]")
     near = cfg["illumination"]["sun_near_view"]
