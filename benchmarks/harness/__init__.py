@@ -35,6 +35,8 @@ from clishell.group import exit_with
 from posenet.errors import PosenetError
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository
+# a child process timed on one core: its BLAS and OpenMP at one thread (the probes of a stage's cost)
+ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 # the learning benchmark's dataset (benchmarks/figures/posenet_learning.py), which the pose benchmarks share:
 # 1000 samples of seed 7 at 320x240 through Mitsuba, 2 render workers
 RENDER_N, SEED, RESOLUTION, BACKEND, WORKERS = 1000, 7, (320, 240), "mitsuba", 2

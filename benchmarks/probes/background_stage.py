@@ -36,11 +36,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
-from harness import ROOT, parser, revision_tree, run_script
+from harness import ONE_THREAD, ROOT, parser, revision_tree, run_script
 
 KINDS = ("clean", "complex", "earth", "cluttered")
 RESOLUTION, SEED = (640, 480), 0
-ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 
 
 def parse_args() -> argparse.Namespace:

@@ -39,10 +39,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
 import numpy as np
-from harness import ROOT, parser, revision_tree, run_script
+from harness import ONE_THREAD, ROOT, parser, revision_tree, run_script
 
 CASES = (("default", (640, 480)), ("speedplus", (1920, 1200)))
-ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 
 
 def timed(fn: Callable[..., Any], spent: list[float]) -> Callable[..., Any]:

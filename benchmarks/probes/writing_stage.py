@@ -22,9 +22,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the harness
-from harness import ROOT, parser, revision_tree, run_script
-
-ONE_THREAD = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+from harness import ONE_THREAD, ROOT, parser, revision_tree, run_script
 
 
 def parse_args() -> argparse.Namespace:
