@@ -9,6 +9,8 @@ import sys
 
 import pytest
 
+from scgen.io.cores import seeing_cores
+
 COUNTS = """
 from posenet.training.train import cpu_threads
 from scgen.io import usable_cores
@@ -35,3 +37,20 @@ def test_a_process_held_to_one_core_defaults_to_one_worker_and_one_thread() -> N
     # and the same counts, unrestricted, are this process's cores
     done = subprocess.run([sys.executable, "-c", COUNTS], env=env, capture_output=True, text=True, check=True)
     assert done.stdout.split() == [str(len(os.sched_getaffinity(0)))] * 3, done.stderr
+
+
+@pytest.mark.skipif(
+    not hasattr(os, "sched_setaffinity") or len(os.sched_getaffinity(0)) < 2, reason="needs 2 usable cores"
+)
+def test_seeing_fewer_cores_lasts_only_while_open() -> None:
+    """What a library sizes its pool from inside (Blender's import) sees the cores asked for; the process
+    runs on all of its cores again after, even when the body raised."""
+    cores = os.sched_getaffinity(0)
+    with seeing_cores(1):
+        assert len(os.sched_getaffinity(0)) == 1
+    assert os.sched_getaffinity(0) == cores
+    with pytest.raises(RuntimeError), seeing_cores(1):
+        raise RuntimeError
+    assert os.sched_getaffinity(0) == cores
+    with seeing_cores(None), seeing_cores(len(cores)):
+        assert os.sched_getaffinity(0) == cores

@@ -62,7 +62,7 @@ class BlenderBackend:
         (None: as region_render() says); `models`: every object's model by obj_id, for SceneSpec.objects
         (None: the target's alone)."""
         quality_preset = preset(quality)
-        self._bpy = import_bpy()
+        self._bpy = import_bpy(threads)
         self._bpy.ops.wm.read_factory_settings(use_empty=True)  # also resets the device preferences
         self.device = select_device(self._bpy, device)
         self._workdir = Path(tempfile.mkdtemp(prefix="scgen-blender-", dir=_ram_dir()))
