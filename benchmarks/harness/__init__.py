@@ -8,6 +8,7 @@ lists the scripts):
 - seeds: the learning benchmark's dataset, which the pose benchmarks render alike (SEED, RENDER_N, ...);
 - --out: `fresh_run` (a run folder that holds a run is refused, or deleted with --overwrite);
 - tables and plots: `pct`, `pyplot`, `label` (a caption on a picture's panel);
+- image quality: `foreground_psnr` (a render against a reference, over the objects);
 - `revision_tree`: the code at another git revision, for the before/after comparisons.
 
 It imports neither torch nor a renderer, so every script's --help stays quick, and of the project only
@@ -48,6 +49,17 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         self.print_usage(sys.stderr)
         self.exit(2, f"Error: {message}\n")
+
+
+def foreground_psnr(rgb: Any, ref: Any, instance: Any) -> float:
+    """PSNR (dB) of an 8-bit sRGB image against a reference over the rendered objects (instance > 0),
+    dilated by 2 px to include their edges: how a render setting is scored against a many-spp reference."""
+    import cv2
+    import numpy as np
+
+    region = cv2.dilate((instance > 0).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    err = (rgb.astype(np.float64) - ref.astype(np.float64))[region]
+    return float(10 * np.log10(255.0**2 / max(1e-12, float(np.mean(err**2)))))
 
 
 def parser(doc: str | None) -> Parser:

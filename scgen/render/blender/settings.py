@@ -31,10 +31,12 @@ class QualityPreset:
 
 # Chosen by PSNR against a 1024-spp reference per second (benchmarks/bench_blender.py, 640x480,
 # 2 CPU cores): OIDN FAST is the best buy from 8 spp up; OIDN HIGH/ACCURATE costs ~5 s a frame on
-# CPU for < 1 dB over BALANCED; fewer bounces save no measurable time on this scene.
+# CPU for < 1 dB over BALANCED; fewer bounces save no measurable time on this scene. The default's 12
+# samples with the light tree (configure_common) give 0.35 dB more over the objects than BlenderProc's 16
+# without it, in 8 % less time (12 scenes against 512 spp, docs/benchmarks.md, "Cycles' settings").
 PRESETS = {
     "draft": QualityPreset(8, 0.05, 2, 1, 1, denoise_quality=None),
-    "default": QualityPreset(16, 0.02, 3, 1, 2, denoise_quality="FAST"),  # BlenderProc's BOP sample count
+    "default": QualityPreset(12, 0.02, 3, 1, 2, denoise_quality="FAST"),
     "high": QualityPreset(64, 0.01, 4, 2, 2, denoise_quality="BALANCED"),
 }
 FILTER_WIDTH_PX = 1.5  # the beauty render's Blackman-Harris filter width
@@ -64,7 +66,9 @@ def configure_common(scene: Any, gpu: bool, threads: int | None, exr_path: str) 
     scene.render.use_sequencer = False
     scene.render.resolution_percentage = 100
     scene.cycles.sample_offset = 0  # the centred sample 0, source of the label passes, must be rendered
-    scene.cycles.use_light_tree = False  # two suns at most: the tree only costs time
+    # the light tree samples the sun and the Earth's or Moon's light by what each may give the shading
+    # point: +1.4 dB over the objects at 16 spp for 7 % more time (docs/benchmarks.md, "Cycles' settings")
+    scene.cycles.use_light_tree = True
     scene.cycles.caustics_reflective = scene.cycles.caustics_refractive = False
     scene.cycles.transmission_bounces = scene.cycles.volume_bounces = 0
     scene.cycles.transparent_max_bounces = 0
