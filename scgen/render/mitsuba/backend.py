@@ -49,6 +49,9 @@ QUALITY_SPP = {"draft": 4, "default": 16, "high": 64}
 GUARD_M = 1e4  # half the span of the guard triangle (see MitsubaBackend.__init__)
 PROP_SLOT_TRIANGLES = 4096  # a material's prop mesh holds this many triangles at first (it grows if need be)
 FINISHES_PER_CLASS = 3  # target BSDFs (and meshes) made per material class at the start (see TargetFinishes)
+# the path tracer's longest path in vertices: the sun's direct light and two bounces (Mitsuba counts the
+# camera ray's hit as depth 1); benchmarks/probes/mitsuba_depth.py measures the others against 512 spp
+PATH_MAX_DEPTH = 4
 RECORDINGS_KEPT = 32  # frozen renders a backend keeps, the least recently used dropped first
 
 
@@ -292,7 +295,8 @@ class MitsubaBackend:
         key = (camera, tuple(lights))
         if key not in self._scenes:
             sensor = _sensor(camera, self.spp)
-            d = {"type": "scene", "integrator": {"type": "path", "max_depth": 4}, "sensor": sensor, **lights}
+            integrator = {"type": "path", "max_depth": PATH_MAX_DEPTH}
+            d = {"type": "scene", "integrator": integrator, "sensor": sensor, **lights}
             d.update({f"s{k:03d}": slot.mesh for k, slot in enumerate(self._slots())}, guard=self._guard)
             scene = mi.load_dict(d)
             self._scenes[key] = scene, SceneLights(scene, list(lights))
