@@ -145,7 +145,8 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
                 stamps.clear()
                 instance, depth = blender_backend.instance_and_depth(beauty)
                 alone = blender_backend.props_may_hide_target(spec, hulls[OBJ_ID], instance, depth)
-                aux = timed("aux render (labels)", mode, scene.render_aux, alone)
+                aux_regions = backend.target_regions(spec, regions) if mode == "regions" else regions
+                aux = timed("aux render (labels)", mode, scene.render_aux, alone, aux_regions)
                 buffers = timed("label passes", mode, blender_backend.buffers_from_passes, spec, beauty, aux)
                 background = timed("background", mode, blender_backend.background_image, spec)
                 image = timed("composite", mode, blender_backend.composite, beauty, background)

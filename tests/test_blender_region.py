@@ -132,6 +132,10 @@ def test_without_a_denoiser_the_region_render_is_the_full_frame_byte_for_byte(ge
     if case == "objects apart":
         assert len(traced) == 2 and not inside.all(axis=1).any()  # two, with untraced pixels in every row
         assert {int(full.instance[r.window].max()) for r in traced} == {1, 2}  # one object in each
+        # the aux render (read on the target's pixels alone) traces the target's region and not the prop's
+        assert draft.target_regions(spec, traced) == tuple(
+            r for r in traced if (full.instance[r.window] == 1).any()
+        )
 
 
 def test_denoised_region_render_keeps_the_labels_and_the_presets_quality(generator):

@@ -46,7 +46,8 @@ class Buffers:
 
     depth / target_depth: z along the optical axis in metres, 0 where nothing is hit.
     instance: BACKGROUND_ID, TARGET_ID, object_instance_id(j) or prop_instance_id(len(objects), k).
-    normal: camera-frame unit normal facing the camera (zeros on background).
+    normal: camera-frame unit normal facing the camera on the target's pixels, zeros elsewhere (the shadow
+    label reads it there alone, so the Blender backend's aux render traces only the target's region).
     sun_blocked: the ray from the visible surface towards the sun hits a non-target object.
     """
 

@@ -168,6 +168,22 @@ def disjoint(regions: list[Region]) -> tuple[Region, ...]:
         merged[pair[0]] = merged[pair[0]].around(b)
 
 
+def holding(regions: Sequence[Region], part: Region) -> tuple[Region, ...]:
+    """The regions that share a pixel with `part`: where disjoint regions were merged from boxes (as
+    covered_regions'), the one holding a box that was among them, or every region for the whole frame."""
+    return tuple(r for r in regions if r.overlaps(part))
+
+
+def target_region(
+    spec: SceneSpec, hulls: Mapping[int, np.ndarray], reach_px: float, margin_px: int
+) -> Region:
+    """covered_region of `spec`'s camera around the target alone (the whole frame when it is out of view)."""
+    cam = spec.camera
+    return covered_region(
+        cam.K_mat, cam.width, cam.height, scene_objects(spec, hulls)[:1], reach_px, margin_px
+    )
+
+
 def scene_objects(spec: SceneSpec, hulls: Mapping[int, np.ndarray]) -> list[np.ndarray]:
     """`spec`'s objects in its camera frame: the target and each labelled object beside it, given by
     `hulls` (the vertices of each model's convex hull, model frame, by obj_id; the target's is OBJ_ID's),

@@ -27,7 +27,7 @@ from scgen.render.blender.scene import ALONE, BEAUTY, PROBE, BlenderScene
 from scgen.render.blender.settings import FILTER_REACH_PX, preset
 from scgen.render.camera import record_image, render_camera
 from scgen.render.objects import model_hulls, objects_alone_depth, with_target
-from scgen.render.region import Region, full_frame, region_render, scene_regions
+from scgen.render.region import Region, full_frame, holding, region_render, scene_regions, target_region
 from scgen.render.sky.backgrounds import background_image
 from scgen.scenes.geometry import project
 from scgen.scenes.model import TargetModel
@@ -84,12 +84,13 @@ class BlenderBackend:
     def render(self, spec: SceneSpec) -> Buffers:
         shown = replace(spec, camera=render_camera(spec.camera))
         self.scene.update(shown)
-        self.scene.set_regions(self.regions(shown))
+        regions = self.regions(shown)
+        self.scene.set_regions(regions)
         beauty = self.scene.render_beauty()
         if shown.camera == spec.camera:  # not `is`: render_camera's cache returns an equal camera of before
             instance, depth = instance_and_depth(beauty)
             hidden = props_may_hide_target(spec, self._hulls[TARGET_OBJ_ID], instance, depth)
-            aux = self.scene.render_aux(target_alone=hidden)
+            aux = self.scene.render_aux(hidden, self.target_regions(shown, regions))
             buffers = buffers_from_passes(spec, beauty, aux)
             buffers.objects_depth = objects_alone_depth(spec, self.models)
         else:  # a lens Cycles' pinhole image does not sample: labels by exact ray casts along its rays
@@ -103,6 +104,14 @@ class BlenderBackend:
         if not self.trace_region:
             return (full_frame(spec.camera.width, spec.camera.height),)
         return scene_regions(spec, self._hulls, FILTER_REACH_PX, self.margin_px)
+
+    def target_regions(self, spec: SceneSpec, regions: tuple[Region, ...]) -> tuple[Region, ...]:
+        """The parts of `regions` the aux render traces: the one holding the target, since its passes are
+        read on the target's pixels alone (the shadow label's normals and sun visibility, the target-alone
+        depth); a prop's or another object's box apart from it is left out."""
+        if not self.trace_region:
+            return regions
+        return holding(regions, target_region(spec, self._hulls, FILTER_REACH_PX, self.margin_px))
 
     def _ray_caster(self) -> MitsubaBackend:
         """The Mitsuba backend's exact geometric passes, made on first need (cameras with a lens)."""
@@ -163,7 +172,6 @@ def buffers_from_passes(
     """The label passes from the EXR channels of the beauty and aux renders (see scene for the
     layers); the image is the camera stage's."""
     instance, depth = instance_and_depth(beauty)
-    hit = instance != BACKGROUND_ID
     on_target = instance == TARGET_ID
     if f"{ALONE}.Depth.Z" in aux:
         alone = aux[f"{ALONE}.Depth.Z"]
@@ -174,7 +182,7 @@ def buffers_from_passes(
     normal = np.stack([aux[f"{PROBE}.Normal.{c}"] for c in "XYZ"], axis=-1)
     length = np.linalg.norm(normal, axis=-1, keepdims=True)
     unit = normal / np.maximum(length, 1e-12)
-    normal = np.where(hit[..., None] & (length > 0), unit, 0.0).astype(np.float32)
+    normal = np.where(on_target[..., None] & (length > 0), unit, 0.0).astype(np.float32)
     edge_on = np.abs(normal @ np.asarray(spec.sun.direction, np.float32)) <= GRAZING
     sun_blocked = on_target & (aux[f"{PROBE}.Combined.R"] <= 0.0) & ~edge_on
 

@@ -127,9 +127,9 @@ class BlenderScene:
         self.beauty.cycles.seed = render_seed(spec)
 
     def set_regions(self, regions: tuple[Region, ...]) -> None:
-        """Trace only `regions` (disjoint) of the frame in both scenes, each with a render call of its own
-        (Cycles' border, cropped); the passes read back are the full frame all the same, every pixel
-        outside as a pixel that meets nothing renders."""
+        """Trace only `regions` (disjoint) of the frame in the beauty render, each with a render call of its
+        own (Cycles' border, cropped); the passes read back are the full frame all the same, every pixel
+        outside as a pixel that meets nothing renders. The aux render is given its own (render_aux)."""
         self.regions = regions
 
     @staticmethod
@@ -140,24 +140,25 @@ class BlenderScene:
             r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = border_fractions(region)
 
     def render_beauty(self) -> dict[str, np.ndarray]:
-        return self._render(self.beauty, self.beauty_exr)
+        return self._render(self.beauty, self.beauty_exr, self.regions)
 
-    def render_aux(self, target_alone: bool) -> dict[str, np.ndarray]:
-        """The aux passes; the `alone` layer (target-alone depth) only when `target_alone`."""
+    def render_aux(self, target_alone: bool, regions: tuple[Region, ...]) -> dict[str, np.ndarray]:
+        """The aux passes over `regions` (disjoint); the `alone` layer (target-alone depth) only when
+        `target_alone`. Each pixel's one centred sample is the same whatever else is traced."""
         self.alone.use = target_alone
-        return self._render(self.aux, self.aux_exr)
+        return self._render(self.aux, self.aux_exr, regions)
 
-    def _render(self, scene: Any, path: Path) -> dict[str, np.ndarray]:
-        """Render `scene`'s regions to its EXR and read them back: {'layer.Pass.C': H x W float32}, row 0
-        at the top, the full frame."""
+    def _render(self, scene: Any, path: Path, regions: tuple[Region, ...]) -> dict[str, np.ndarray]:
+        """Render `regions` of `scene` to its EXR and read them back: {'layer.Pass.C': H x W float32},
+        row 0 at the top, the full frame."""
         crops = []
-        for region in self.regions:
+        for region in regions:
             self._set_border(scene, region)
             crops.append(self._render_call(scene, path))
-        if len(self.regions) == 1 and self.regions[0].full:
+        if len(regions) == 1 and regions[0].full:
             return crops[0]
         fill = {name: MISS_DEPTH if name.endswith("Depth.Z") else 0.0 for name in crops[0]}
-        return {name: paste(self.regions, [c[name] for c in crops], fill[name]) for name in crops[0]}
+        return {name: paste(regions, [c[name] for c in crops], fill[name]) for name in crops[0]}
 
     def _render_call(self, scene: Any, path: Path) -> dict[str, np.ndarray]:
         """One render of `scene` as its border stands, read back from its EXR."""

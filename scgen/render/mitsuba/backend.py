@@ -253,7 +253,7 @@ class MitsubaBackend:
             depth=depth,
             instance=instance.reshape(H, W),
             target_depth=target_depth,
-            normal=normal.reshape(H, W, 3).astype(np.float32),
+            normal=np.where(on_target[:, None], normal, 0.0).reshape(H, W, 3).astype(np.float32),
             sun_blocked=sun_blocked.reshape(H, W),
             objects_depth=objects_alone_depth(spec, self.models),
         )
