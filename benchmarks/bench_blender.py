@@ -31,7 +31,7 @@ from harness import foreground_psnr, parser, run_script
 from scgen import Generator
 from scgen.annotate import annotate
 from scgen.dataset.layout import OBJ_ID, Layout
-from scgen.dataset.writer import WriteOptions, write_sample
+from scgen.dataset.writer import WriteOptions, resolved, write_sample
 from scgen.render.blender.backend import BlenderBackend
 from scgen.render.blender.settings import FILTER_REACH_PX, PRESETS, QualityPreset, configure_beauty
 from scgen.render.objects import model_hulls
@@ -59,6 +59,7 @@ def persistent_run(generator: Generator, specs: list[SceneSpec], quality: str) -
     machine's drift hits both alike); per mode the per-frame times, Cycles' seconds and RSS."""
     backend = BlenderBackend(generator.model, quality=quality)
     runs = {m: {"render_s": [], "sample_s": [], "share": [], "cycles": 0.0, "rss": {}} for m in MODES}
+    write = resolved(WriteOptions(), generator.cfg["camera"])  # as a run writes: the camera's format
     with tempfile.TemporaryDirectory(prefix="bench-blender-") as out:
         layouts = {m: Layout(f"{out}/{k}") for k, m in enumerate(MODES)}
         for layout in layouts.values():
@@ -69,7 +70,7 @@ def persistent_run(generator: Generator, specs: list[SceneSpec], quality: str) -
                 t0, c0 = time.perf_counter(), backend.cycles_s
                 buffers = backend.render(spec)
                 t1 = time.perf_counter()
-                write_sample(layouts[mode], spec, buffers, annotate(spec, buffers), "train", WriteOptions())
+                write_sample(layouts[mode], spec, buffers, annotate(spec, buffers), "train", write)
                 r["render_s"].append(t1 - t0)
                 r["sample_s"].append(time.perf_counter() - t0)
                 r["cycles"] += backend.cycles_s - c0
@@ -129,6 +130,7 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
         for stage, seconds in stages.items():
             times[mode].setdefault(stage, []).append(seconds)
 
+    write = resolved(WriteOptions(), generator.cfg["camera"])  # as a run writes: the camera's format
     with tempfile.TemporaryDirectory(prefix="bench-blender-") as out:
         layout = Layout(out)
         write_static_files(layout, generator)
@@ -154,9 +156,7 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
                     "camera stage", mode, blender_backend.record_image, spec, image, buffers.instance
                 )
                 annotation = timed("annotation", mode, annotate, spec, buffers)
-                timed(
-                    "writing", mode, write_sample, layout, spec, buffers, annotation, "train", WriteOptions()
-                )
+                timed("writing", mode, write_sample, layout, spec, buffers, annotation, "train", write)
                 times[mode].setdefault("sample (total)", []).append(time.perf_counter() - t_sample)
                 scene.beauty.cycles.use_denoising = False
                 t0 = time.perf_counter()

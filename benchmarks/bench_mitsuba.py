@@ -32,7 +32,7 @@ from scgen.annotate import annotate
 from scgen.dataset.layout import DATASET_FILES, Layout, bytes_by_kind
 from scgen.dataset.splits import plan_splits
 from scgen.dataset.validate import reprojection_error
-from scgen.dataset.writer import WriteOptions, finalize, write_sample
+from scgen.dataset.writer import WriteOptions, finalize, resolved, write_sample
 from scgen.io.parent_watch import spawn_pool
 from scgen.render.base import create_backend
 from scgen.run.runner import write_static_files
@@ -176,6 +176,7 @@ def full_size(n: int, quality: str, out: Path) -> None:
     model, cfg = load_target(), load_config()
     backend = create_backend("mitsuba", model, quality=quality)
     generator = Generator(model, cfg, 0)
+    write = resolved(WriteOptions(), generator.cfg["camera"])  # as a run writes: the camera's format
     specs = [generator.scene(i) for i in range(n)]
     splits = plan_splits([spec_key(s) for s in specs], (0.7, 0.1, 0.2), 0)
     layout = Layout(out)
@@ -189,7 +190,7 @@ def full_size(n: int, quality: str, out: Path) -> None:
         buffers = backend.render(spec)
         t1 = time.perf_counter()
         ann = annotate(spec, buffers)
-        write_sample(layout, spec, buffers, ann, split, WriteOptions())
+        write_sample(layout, spec, buffers, ann, split, write)
         t2 = time.perf_counter()
         t_render += t1 - t0
         t_other += t2 - t1
@@ -227,6 +228,7 @@ def stage_profile(n: int, quality: str, out: Path) -> None:
     model = load_target()
     backend = create_backend("mitsuba", model, quality=quality)
     generator = Generator(model, load_config(), 0)
+    write = resolved(WriteOptions(), generator.cfg["camera"])  # as a run writes: the camera's format
     layout = Layout(out)
     write_static_files(layout, generator)
     times: dict[str, list[float]] = defaultdict(list)
@@ -257,7 +259,7 @@ def stage_profile(n: int, quality: str, out: Path) -> None:
         t1 = time.perf_counter()
         ann = annotate(spec, buffers)
         t2 = time.perf_counter()
-        write_sample(layout, spec, buffers, ann, "train", WriteOptions())
+        write_sample(layout, spec, buffers, ann, "train", write)
         t3 = time.perf_counter()
         times["annotation"].append(t2 - t1)
         times["writing"].append(t3 - t2)

@@ -15,7 +15,7 @@ import functools
 import io
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -115,6 +115,11 @@ def rgb_format_for(requested: str, camera: dict[str, Any]) -> str:
     if requested != "auto":
         return requested
     return "jpg" if camera["sensor"]["enabled"] and camera["output"]["bits"] == 8 else "png"
+
+
+def resolved(opts: WriteOptions, camera: dict[str, Any]) -> WriteOptions:
+    """`opts` with its rgb format resolved for the camera (rgb_format_for): what a run writes with."""
+    return replace(opts, rgb_format=rgb_format_for(opts.rgb_format, camera))
 
 
 def drawn_jpeg_quality(spec: SceneSpec) -> int:

@@ -6,7 +6,7 @@ import hashlib
 import json
 import sys
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +21,7 @@ from scgen.dataset.writer import (
     dataset_depth_scale,
     existing_sample_ids,
     finalize,
-    rgb_format_for,
+    resolved,
 )
 from scgen.errors import ScgenError
 from scgen.generator import Generator
@@ -107,14 +107,13 @@ def make_plan(job: RenderJob) -> Plan:
         backend=job.backend, quality=job.quality, device=job.device,
         threads=renderer_threads(job.backend, job.workers, job.threads),
     )  # fmt: skip
-    rgb_format = rgb_format_for(job.write.rgb_format, generator.cfg["camera"])
     specs = sample_all(generator, job.n * generator.frames, job.workers)
     if is_sequence(generator.cfg):
         keys, splits = sequence_splits(specs, generator.frames, job)
     else:
         keys = [spec_key(s) for s in specs]
         splits = plan_splits(keys, job.ratios, job.seed, job.split_by)
-    return Plan(generator, specs, splits, keys, replace(job.write, rgb_format=rgb_format))
+    return Plan(generator, specs, splits, keys, resolved(job.write, generator.cfg["camera"]))
 
 
 def sequence_splits(specs: list[SceneSpec], frames: int, job: RenderJob) -> tuple[list[str], list[str]]:
