@@ -179,17 +179,20 @@ def target_region(
 ) -> Region:
     """covered_region of `spec`'s camera around the target alone (the whole frame when it is out of view)."""
     cam = spec.camera
-    return covered_region(
-        cam.K_mat, cam.width, cam.height, scene_objects(spec, hulls)[:1], reach_px, margin_px
-    )
+    return covered_region(cam.K_mat, cam.width, cam.height, [target_hull(spec, hulls)], reach_px, margin_px)
+
+
+def target_hull(spec: SceneSpec, hulls: Mapping[int, np.ndarray]) -> np.ndarray:
+    """The target's convex hull vertices (`hulls`' OBJ_ID entry, model frame) in `spec`'s camera frame."""
+    return hulls[TARGET_OBJ_ID] @ spec.target.R_mat.T + spec.target.t_vec
 
 
 def scene_objects(spec: SceneSpec, hulls: Mapping[int, np.ndarray]) -> list[np.ndarray]:
     """`spec`'s objects in its camera frame: the target and each labelled object beside it, given by
     `hulls` (the vertices of each model's convex hull, model frame, by obj_id; the target's is OBJ_ID's),
     then each prop's mesh."""
-    target = hulls[TARGET_OBJ_ID] @ spec.target.R_mat.T + spec.target.t_vec
-    return [target, *object_hulls(spec, hulls), *(np.asarray(prop_mesh(p).vertices) for p in spec.props)]
+    props = (np.asarray(prop_mesh(p).vertices) for p in spec.props)
+    return [target_hull(spec, hulls), *object_hulls(spec, hulls), *props]
 
 
 def scene_region(spec: SceneSpec, hulls: Mapping[int, np.ndarray], reach_px: float, margin_px: int) -> Region:
