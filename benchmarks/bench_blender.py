@@ -139,10 +139,9 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
                 t_sample = time.perf_counter()
                 timed("scene update (matrices, props)", mode, scene.update, spec)
                 regions = timed("regions", mode, regions_of, spec)
-                scene.set_regions(regions)
                 stamps.clear()
                 t0 = time.perf_counter()
-                beauty = scene.render_beauty()
+                beauty = scene.render_beauty(regions)
                 beauty_stages = cycles_stages(t0, time.perf_counter())
                 stamps.clear()
                 instance, depth = blender_backend.instance_and_depth(beauty)
@@ -160,7 +159,7 @@ def stage_profile(generator: Generator, specs: list[SceneSpec], quality: str) ->
                 times[mode].setdefault("sample (total)", []).append(time.perf_counter() - t_sample)
                 scene.beauty.cycles.use_denoising = False
                 t0 = time.perf_counter()
-                scene.render_beauty()
+                scene.render_beauty(regions)
                 plain = cycles_stages(t0, time.perf_counter())["Cycles: path tracing + denoising"]
                 scene.beauty.cycles.use_denoising = PRESETS[quality].denoise_quality is not None
                 stamps.clear()

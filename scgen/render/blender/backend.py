@@ -85,8 +85,7 @@ class BlenderBackend:
         shown = replace(spec, camera=render_camera(spec.camera))
         self.scene.update(shown)
         regions = self.regions(shown)
-        self.scene.set_regions(regions)
-        beauty = self.scene.render_beauty()
+        beauty = self.scene.render_beauty(regions)
         if shown.camera == spec.camera:  # not `is`: render_camera's cache returns an equal camera of before
             instance, depth = instance_and_depth(beauty)
             hidden = props_may_hide_target(spec, self._hulls[TARGET_OBJ_ID], instance, depth)

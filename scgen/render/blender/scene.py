@@ -114,7 +114,7 @@ class BlenderScene:
         self.alone.layer_collection.children[self.props_coll.name].exclude = True
         probe.material_override = self.alone.material_override = override
         self._camera_key: tuple | None = None
-        self.regions: tuple[Region, ...] = (full_frame(1, 1),)
+        self.regions: tuple[Region, ...] = (full_frame(1, 1),)  # the last beauty render's, for tests
         self.cycles_s = 0.0  # time inside bpy.ops.render.render, for benchmarks
 
     def update(self, spec: SceneSpec) -> None:
@@ -126,12 +126,6 @@ class BlenderScene:
         self._set_finish(spec.finish)
         self.beauty.cycles.seed = render_seed(spec)
 
-    def set_regions(self, regions: tuple[Region, ...]) -> None:
-        """Trace only `regions` (disjoint) of the frame in the beauty render, each with a render call of its
-        own (Cycles' border, cropped); the passes read back are the full frame all the same, every pixel
-        outside as a pixel that meets nothing renders. The aux render is given its own (render_aux)."""
-        self.regions = regions
-
     @staticmethod
     def _set_border(scene: Any, region: Region) -> None:
         r = scene.render
@@ -139,8 +133,10 @@ class BlenderScene:
         if not region.full:
             r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = border_fractions(region)
 
-    def render_beauty(self) -> dict[str, np.ndarray]:
-        return self._render(self.beauty, self.beauty_exr, self.regions)
+    def render_beauty(self, regions: tuple[Region, ...]) -> dict[str, np.ndarray]:
+        """The beauty passes over `regions` (disjoint) of the frame."""
+        self.regions = regions
+        return self._render(self.beauty, self.beauty_exr, regions)
 
     def render_aux(self, target_alone: bool, regions: tuple[Region, ...]) -> dict[str, np.ndarray]:
         """The aux passes over `regions` (disjoint); the `alone` layer (target-alone depth) only when
@@ -149,8 +145,9 @@ class BlenderScene:
         return self._render(self.aux, self.aux_exr, regions)
 
     def _render(self, scene: Any, path: Path, regions: tuple[Region, ...]) -> dict[str, np.ndarray]:
-        """Render `regions` of `scene` to its EXR and read them back: {'layer.Pass.C': H x W float32},
-        row 0 at the top, the full frame."""
+        """Render `regions` of `scene` to its EXR, each with a render call of its own (Cycles' border,
+        cropped), and read them back: {'layer.Pass.C': H x W float32}, row 0 at the top, the full frame,
+        every pixel outside the regions as a pixel that meets nothing renders."""
         crops = []
         for region in regions:
             self._set_border(scene, region)
